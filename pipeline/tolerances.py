@@ -1,0 +1,42 @@
+"""Every tolerance of the import stage in one place (after trimesh's ``constants.ToleranceMesh``).
+
+Lengths are relative to the model size, the diagonal of the rest-pose bounding box in output
+units, unless a name says otherwise.  Use :func:`model_scale` to turn them into absolute values.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Vertices closer than this (times the model size) are the same position for welding.
+WELD_RELATIVE = 1e-6
+#: Two influence weights are "the same" for welding when they differ by less than this (absolute).
+WELD_WEIGHT = 1e-4
+#: Influence weights below this (absolute, after normalisation) are negligible and dropped by ``bind``.
+NEGLIGIBLE_WEIGHT = 1e-4
+#: Default weight threshold for ``--parts any``: a bone owns a triangle if it has at least this
+#: weight on one of its vertices.
+PARTS_ANY_THRESHOLD = 0.1
+#: Sphere padding: absolute pad is this times the model size ...
+SPHERE_PAD_RELATIVE = 1e-5
+#: ... plus this fraction of the sphere radius.
+SPHERE_PAD_RADIUS = 1e-6
+#: Weights must sum to 1 within this after ``bind``.
+WEIGHT_SUM = 1e-5
+#: Cap on what one input may make the importer allocate: bytes per byte of input file ...
+ALLOC_FACTOR = 400
+#: ... plus this many bytes, so that tiny files still import.
+ALLOC_FLOOR = 256 * 1024 * 1024
+
+
+def model_scale(points: np.ndarray) -> float:
+    """Size of a model: the diagonal of the axis-aligned bounding box of ``points`` ``(n, 3)``.
+
+    Returns 1.0 for an empty or degenerate point set so relative tolerances stay positive.
+    """
+    if len(points) == 0:
+        return 1.0
+    lo = np.min(points, axis=0).astype(np.float64)
+    hi = np.max(points, axis=0).astype(np.float64)
+    d = float(np.linalg.norm(hi - lo))
+    return d if np.isfinite(d) and d > 0 else 1.0
