@@ -1,0 +1,111 @@
+"""Helpers shared by the readers: input checks, allocation cap, influence packing, frame rates."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from ..errors import InputError
+from ..tolerances import ALLOC_FACTOR, ALLOC_FLOOR
+
+#: Frame rates a time step is snapped to when inferring a file's rate from its key times.
+COMMON_FPS = (8, 10, 12, 15, 23.976, 24, 25, 29.97, 30, 48, 50, 59.94, 60, 90, 100, 120, 240)
+
+
+def check_input_file(path) -> int:
+    """Raise :class:`InputError` unless ``path`` is a readable, non-empty file; return its size."""
+    p = os.fspath(path)
+    if not os.path.exists(p):
+        raise InputError(p, "no such file")
+    if os.path.isdir(p):
+        raise InputError(p, "is a directory, not a file")
+    try:
+        size = os.path.getsize(p)
+        with open(p, "rb") as fh:
+            fh.read(1)
+    except OSError as exc:
+        raise InputError(p, f"cannot be read ({exc.strerror or exc})") from None
+    if size == 0:
+        raise InputError(p, "file is empty (0 bytes)")
+    return size
+
+
+class AllocationBudget:
+    """Caps what one input file may make the importer allocate.
+
+    The budget is ``ALLOC_FACTOR * file_size + ALLOC_FLOOR`` bytes; :meth:`claim` raises
+    :class:`InputError` when a planned allocation would exceed it.
+    """
+
+    def __init__(self, path, file_size: int):
+        self.path = os.fspath(path)
+        self.limit = ALLOC_FACTOR * int(file_size) + ALLOC_FLOOR
+        self.used = 0
+
+    def claim(self, nbytes: float, what: str) -> None:
+        self.used += int(nbytes)
+        if self.used > self.limit:
+            raise InputError(self.path, f"{what} would need {self.used / 2**20:.0f} MiB, more than this "
+                             f"{self.limit / 2**20:.0f} MiB budget for a file of its size allows (corrupt or hostile file?)")
+
+
+def pack_influences(n: int, vertex: np.ndarray, joint: np.ndarray, weight: np.ndarray):
+    """Turn flat (vertex, joint, weight) triples into padded per-vertex arrays.
+
+    Returns ``joint_indices (n, k) int32`` and ``joint_weights (n, k) float32`` where ``k`` is
+    the largest number of influences of any vertex (at least 1); entries are sorted by
+    decreasing weight; padding has joint 0 and weight 0.  Zero weights are dropped.
+    """
+    vertex = np.asarray(vertex, dtype=np.int64)
+    joint = np.asarray(joint, dtype=np.int64)
+    weight = np.asarray(weight, dtype=np.float64)
+    keep = weight > 0
+    vertex, joint, weight = vertex[keep], joint[keep], weight[keep]
+    # Merge duplicate (vertex, joint) entries by summing.
+    if len(vertex):
+        key = vertex * (int(joint.max()) + 1) + joint
+        uk, inv = np.unique(key, return_inverse=True)
+        w = np.bincount(inv, weights=weight)
+        jmax = int(joint.max()) + 1
+        vertex, joint, weight = uk // jmax, uk % jmax, w
+    counts = np.bincount(vertex, minlength=n) if len(vertex) else np.zeros(n, dtype=np.int64)
+    k = max(1, int(counts.max()) if n else 1)
+    order = np.lexsort((-weight, vertex))
+    vertex, joint, weight = vertex[order], joint[order], weight[order]
+    starts = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(counts, out=starts[1:])
+    slot = np.arange(len(vertex)) - starts[vertex]
+    ji = np.zeros((n, k), dtype=np.int32)
+    jw = np.zeros((n, k), dtype=np.float32)
+    ji[vertex, slot] = joint
+    jw[vertex, slot] = weight
+    return ji, jw
+
+
+def infer_fps(seconds_steps, fallback: float = 24.0) -> float:
+    """Infer a frame rate from the positive time steps (seconds) between keys of a file."""
+    steps = np.asarray(seconds_steps, dtype=np.float64)
+    steps = steps[steps > 1e-6]
+    if len(steps) == 0:
+        return float(fallback)
+    fps = 1.0 / float(np.median(steps))
+    best = min(COMMON_FPS, key=lambda c: abs(fps - c))
+    return float(best) if abs(fps - best) <= 0.002 * best else round(fps, 3)
+
+
+def clip_name(raw: str, taken: set) -> str:
+    """A clip's name as shown to users: FBX ``Armature|walk`` becomes ``walk``; duplicates get a suffix."""
+    name = (raw or "").split("|")[-1].strip() or "clip"
+    base, i = name, 1
+    while name in taken:
+        i += 1
+        name = f"{base}_{i}"
+    taken.add(name)
+    return name
+
+
+def check_finite(path, what: str, arr: np.ndarray) -> None:
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.count_nonzero(~np.isfinite(np.asarray(arr).reshape(len(arr), -1)).any(axis=1))) if len(arr) else 0
+        raise InputError(path, f"{what} contain NaN or infinite values ({bad} affected)")
