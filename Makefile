@@ -1,0 +1,38 @@
+# colossus: every target sets up what it needs first, so `make demo` or `make test` works on a
+# fresh machine.  A CPython >= 3.12 is found by tools/find-python (pyenv versions included).
+VENV    := .venv
+PY      := $(VENV)/bin/python
+STAMP   := $(VENV)/.installed
+OUT     := out
+
+.PHONY: setup demo test bench samples clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@set -e; py=$$(tools/find-python 12); echo "using $$py ($$($$py --version))"; \
+	  [ -x $(PY) ] || $$py -m venv $(VENV); \
+	  $(PY) -m pip install -q --upgrade pip; \
+	  $(PY) -m pip install -q -e '.[test,bench]'
+	@touch $(STAMP)
+
+demo: setup
+	@mkdir -p $(OUT)
+	$(VENV)/bin/colossus import samples/creature.glb -o $(OUT)/creature.usda
+	$(VENV)/bin/colossus validate $(OUT)/creature.usda
+
+test: setup
+	$(PY) -m pytest -q
+
+bench: setup
+	$(VENV)/bin/colossus bench
+
+# Regenerate the Blender samples with bpy (CPython 3.11 only, in its own venv).
+samples:
+	@set -e; py=$$(tools/find-python 11 11); \
+	  [ -x .venv-bpy/bin/python ] || $$py -m venv .venv-bpy; \
+	  .venv-bpy/bin/python -c "import bpy" 2>/dev/null || .venv-bpy/bin/pip install -q 'bpy==5.0.1'; \
+	  .venv-bpy/bin/python samples/make_samples.py
+
+clean:
+	rm -rf $(OUT) .pytest_cache

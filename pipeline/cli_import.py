@@ -1,0 +1,168 @@
+"""``colossus import``: a Blender export in, a USD collider asset out."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+import click
+
+from .errors import ColossusError, InputError, OutputError, UsageError
+from .tolerances import PARTS_ANY_THRESHOLD
+
+LARGE_INPUT_BYTES = 4 * 2**20  # show a progress bar from this input size on (when stderr is a terminal)
+
+
+def fail(message: str, code: int = 1):
+    """Print one line on stderr and exit with ``code`` (no traceback)."""
+    click.echo(f"error: {message}", err=True)
+    sys.exit(code)
+
+
+def run_guarded(fn):
+    """Run ``fn`` mapping our exceptions to exit codes: input/output 1, usage 2, anything else 1."""
+    try:
+        return fn()
+    except UsageError as exc:
+        fail(str(exc), 2)
+    except (InputError, OutputError, ColossusError) as exc:
+        fail(str(exc), 1)
+    except MemoryError:
+        fail("out of memory", 1)
+    except KeyboardInterrupt:
+        fail("interrupted", 130)
+    except Exception as exc:  # never a traceback on user input; COLOSSUS_DEBUG=1 shows it
+        if os.environ.get("COLOSSUS_DEBUG"):
+            raise
+        fail(f"internal error ({type(exc).__name__}: {' '.join(str(exc).split())}); rerun with COLOSSUS_DEBUG=1 for details", 1)
+
+
+def _stage_line(rep) -> str:
+    c = rep.counts
+    s = rep.stage
+    if s == "read":
+        return f"{c['vertices']} vertices, {c['faces']} triangles, {c['joints']} joints, {c['clips']} clips ({c['frames']} frames) [{c['format']}]"
+    if s == "bake":
+        return (f"{c['source_up_axis']}-up {c['source_meters_per_unit']:g} m/unit -> {c['up_axis']}-up "
+                f"{c['meters_per_unit']:g} m/unit (x{c['scale_applied']:g})")
+    if s == "weld":
+        return f"{c['vertices_in']} -> {c['vertices_out']} vertices ({c['merged']} merged, {c['weight_conflicts']} weight conflicts)"
+    if s == "orient":
+        return (f"{c['faces_flipped']} faces flipped, {c['shells']} shells ({c['closed_shells']} closed), "
+                f"{c['nonmanifold_edges']} non-manifold edges")
+    if s == "bind":
+        return (f"{c['joints']} joints, <= {c['max_influences']} influences, {c['influences_dropped']} dropped, "
+                f"{c['negligible_dropped']} negligible")
+    if s == "parts":
+        return f"{c['parts']} parts ({c['mode']}), {len(c.get('folded_joints', []))} joints folded"
+    if s == "spheres":
+        return f"max radius {c['max_radius']:.4g}, max slack x{c['max_slack_ratio']:.3f}"
+    if s == "write":
+        return f"{c['path']} ({c['bytes']} bytes)"
+    return ""
+
+
+def format_summary(result) -> str:
+    s = result.summary()
+    lines = [f"colossus import {s['source']} -> {s['output']}", ""]
+    lines.append(f"  {'stage':<8} {'seconds':>8}  what it did")
+    for rep in result.reports:
+        lines.append(f"  {rep.stage:<8} {rep.seconds:8.3f}  {_stage_line(rep)}")
+    lines.append(f"  {'total':<8} {s['seconds']:8.3f}")
+    lines.append("")
+    lines.append(f"  vertices {s['vertices_in']} in, {s['vertices_out']} out | faces flipped {s['faces_flipped']} | "
+                 f"influences dropped {s['influences_dropped']} | parts {s['parts']} | clips {s['clips']} | frames {s['frames']}")
+    sph = next(r for r in result.reports if r.stage == "spheres")
+    parts = sph.details.get("parts", [])
+    if parts:
+        lines.append("")
+        lines.append(f"  {'part':>4} {'joint':<20} {'faces':>6} {'radius':>10} {'slack':>7}")
+        for i, p in enumerate(parts):
+            lines.append(f"  {i:>4} {str(p.get('joint'))[:20]:<20} {p.get('faces', 0):>6} {p.get('radius', 0):>10.4g} "
+                         f"{p.get('slack_ratio', float('nan')):>7.3f}")
+    for w in s["warnings"]:
+        lines.append(f"warning: {w}")
+    return "\n".join(lines)
+
+
+@click.command("import", context_settings={"help_option_names": ["-h", "--help"]})
+@click.argument("src", type=click.Path(dir_okay=True, path_type=str))
+@click.option("-o", "--output", "out", required=True, type=click.Path(path_type=str),
+              help="Collider asset to write (.usda, .usdc or .usd).")
+@click.option("--up-axis", type=click.Choice(["Y", "Z"], case_sensitive=False), default="Y", show_default=True,
+              help="Up axis of the output.")
+@click.option("--meters-per-unit", type=float, default=1.0, show_default=True, help="Output units.")
+@click.option("--max-influences", type=click.IntRange(1, 16), default=4, show_default=True,
+              help="Skin influences kept per vertex (the asset's elementSize).")
+@click.option("--unweighted", type=click.Choice(["error", "nearest-bone"]), default="error", show_default=True,
+              help="What to do with vertices that have no skin weight.")
+@click.option("--parts", "parts_mode", type=click.Choice(["dominant", "any"]), default="dominant", show_default=True,
+              help="dominant: a triangle goes to the bone with the largest summed weight; any: to every bone above --parts-threshold.")
+@click.option("--parts-threshold", type=click.FloatRange(0, 1), default=PARTS_ANY_THRESHOLD, show_default=True,
+              help="Weight a bone needs on a triangle's vertex to own it with --parts any.")
+@click.option("--min-part-faces", type=click.IntRange(1), default=1, show_default=True,
+              help="Bones owning fewer triangles fold into their parent's part.")
+@click.option("--mesh", "meshes", multiple=True, metavar="NAME",
+              help="Mesh to import (repeatable); default every mesh skinned to the skeleton, merged.")
+@click.option("--fps", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Frame rate of the output time codes; default the source's own.")
+@click.option("--source-up-axis", type=click.Choice(["Y", "Z"], case_sensitive=False), default=None,
+              help="Override the up axis the reader assumes for the source.")
+@click.option("--source-meters-per-unit", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Override the units the reader assumes for the source.")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@click.option("--progress/--no-progress", default=None,
+              help="Show a progress bar on stderr (default: for large inputs on a terminal).")
+def import_cmd(src, out, up_axis, meters_per_unit, max_influences, unweighted, parts_mode, parts_threshold,
+               min_part_faces, meshes, fps, source_up_axis, source_meters_per_unit, as_json, progress):
+    """Import the Blender export SRC and write the collider asset OUT.
+
+    \b
+    Stages: read, bake, weld, orient, bind, parts, spheres, write.
+    Exit status: 0 written; 1 the input is unusable (nothing written); 2 usage.
+
+    \b
+    Example:
+      colossus import samples/creature.glb -o creature.usda
+    """
+    from .run import ImportSettings, import_asset
+
+    settings = ImportSettings(
+        up_axis=up_axis.upper(), meters_per_unit=meters_per_unit, max_influences=max_influences,
+        unweighted=unweighted, parts=parts_mode, min_part_faces=min_part_faces,
+        parts_threshold=parts_threshold, meshes=list(meshes), fps=fps,
+        source_up_axis=source_up_axis.upper() if source_up_axis else None,
+        source_meters_per_unit=source_meters_per_unit,
+    )
+    if progress is None:
+        try:
+            big = os.path.getsize(src) >= LARGE_INPUT_BYTES
+        except OSError:
+            big = False
+        progress = big and sys.stderr.isatty()
+
+    bar = None
+    if progress:
+        bar = click.progressbar(length=8, label="importing", file=sys.stderr, show_pos=True,
+                                item_show_func=lambda s: s or "")
+
+    def on_stage(i, n, name):
+        if bar is not None:
+            bar.update(i - bar.pos, name)
+
+    def go():
+        try:
+            if bar is not None:
+                bar.__enter__()
+            return import_asset(src, out, settings, progress=on_stage)
+        finally:
+            if bar is not None:
+                bar.update(8 - bar.pos, "done")
+                bar.__exit__(None, None, None)
+
+    result = run_guarded(go)
+    if as_json:
+        click.echo(json.dumps(result.summary(), indent=2, default=float))
+    else:
+        click.echo(format_summary(result))

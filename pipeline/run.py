@@ -1,0 +1,170 @@
+"""The import stage chained in one visible place: read -> bake -> weld -> orient -> bind -> parts -> spheres -> write."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import time
+from dataclasses import asdict, dataclass, field
+
+from . import __version__
+from .errors import InputError, UsageError
+from .model import SkinnedMesh
+from .readers import read
+from .stages import StageReport
+from .stages.bake import bake
+from .stages.bind import UNWEIGHTED_POLICIES, bind
+from .stages.orient import orient
+from .stages.parts import parts
+from .stages.spheres import spheres
+from .stages.weld import weld
+from .stages.write import check_output_path, write
+from .tolerances import PARTS_ANY_THRESHOLD
+
+STAGES = ("read", "bake", "weld", "orient", "bind", "parts", "spheres", "write")
+
+
+@dataclass
+class ImportSettings:
+    """Every knob of ``colossus import`` (defaults are the command line's)."""
+
+    up_axis: str = "Y"
+    meters_per_unit: float = 1.0
+    max_influences: int = 4
+    unweighted: str = "error"
+    parts: str = "dominant"
+    min_part_faces: int = 1
+    parts_threshold: float = PARTS_ANY_THRESHOLD
+    meshes: list = field(default_factory=list)
+    fps: float | None = None
+    source_up_axis: str | None = None
+    source_meters_per_unit: float | None = None
+
+    def check(self) -> None:
+        if self.up_axis not in ("Y", "Z"):
+            raise UsageError(f"--up-axis must be Y or Z, got {self.up_axis!r}")
+        if not (self.meters_per_unit > 0):
+            raise UsageError(f"--meters-per-unit must be positive, got {self.meters_per_unit}")
+        if self.max_influences < 1:
+            raise UsageError(f"--max-influences must be at least 1, got {self.max_influences}")
+        if self.unweighted not in UNWEIGHTED_POLICIES:
+            raise UsageError(f"--unweighted must be one of {', '.join(UNWEIGHTED_POLICIES)}")
+        if self.parts not in ("dominant", "any"):
+            raise UsageError(f"--parts must be dominant or any, got {self.parts!r}")
+        if self.min_part_faces < 1:
+            raise UsageError(f"--min-part-faces must be at least 1, got {self.min_part_faces}")
+        if self.fps is not None and not (self.fps > 0):
+            raise UsageError(f"--fps must be positive, got {self.fps}")
+        if self.source_meters_per_unit is not None and not (self.source_meters_per_unit > 0):
+            raise UsageError("--source-meters-per-unit must be positive")
+
+
+@dataclass
+class ImportResult:
+    mesh: SkinnedMesh
+    reports: list
+    seconds: float
+    out_path: str
+
+    def summary(self) -> dict:
+        """The numbers of the summary table, JSON-able."""
+        r = {rep.stage: rep for rep in self.reports}
+        m = self.mesh
+        frames = sum(c.frame_count for c in m.clips)
+        return {
+            "source": m.source.get("file"), "output": self.out_path,
+            "vertices_in": r["read"].counts["vertices"], "vertices_out": m.vertex_count,
+            "faces_in": r["read"].counts["faces"], "faces_out": m.face_count,
+            "faces_flipped": r["orient"].counts.get("faces_flipped", 0),
+            "influences_dropped": r["bind"].counts["influences_dropped"] + r["bind"].counts["negligible_dropped"],
+            "joints": m.joint_count, "parts": len(m.parts), "clips": len(m.clips), "frames": frames,
+            "seconds": round(self.seconds, 4),
+            "stage_seconds": {rep.stage: round(rep.seconds, 4) for rep in self.reports},
+            "warnings": [w for rep in self.reports for w in rep.warnings],
+            "stages": {rep.stage: {"counts": rep.counts, **({"details": rep.details} if rep.details else {})}
+                       for rep in self.reports},
+        }
+
+
+def sha256_of(path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def build_collider(src, settings: ImportSettings | None = None, progress=None):
+    """Run every stage but ``write``: returns ``(mesh, reports)``.
+
+    ``progress(i, n, stage)`` is called before each stage when given.
+    """
+    s = settings or ImportSettings()
+    s.check()
+    reports = []
+    stages = STAGES[:-1]
+
+    def step(i, name, fn):
+        if progress:
+            progress(i, len(STAGES), name)
+        t0 = time.perf_counter()
+        out = fn()
+        rep = out[1]
+        rep.seconds = time.perf_counter() - t0
+        reports.append(rep)
+        return out[0]
+
+    def do_read():
+        m = read(src, meshes=s.meshes or None, fps=s.fps)
+        if s.source_up_axis or s.source_meters_per_unit:
+            m = m.replace(up_axis=s.source_up_axis or m.up_axis,
+                          meters_per_unit=s.source_meters_per_unit or m.meters_per_unit)
+        m = m.replace(source={**m.source, "path": os.fspath(src)})
+        if m.face_count == 0:
+            raise InputError(src, "the skinned mesh has no faces")
+        rep = StageReport("read", counts={
+            "vertices": m.vertex_count, "faces": m.face_count, "joints": m.joint_count,
+            "clips": len(m.clips), "frames": sum(c.frame_count for c in m.clips),
+            "format": m.source.get("format"), "meshes": len(m.source.get("meshes", [])),
+            "time_codes_per_second": m.time_codes_per_second})
+        if not m.clips:
+            rep.warnings.append("the file has no animation clip; spheres hold for the bind pose only")
+        return m, rep
+
+    mesh = step(0, "read", do_read)
+    mesh = step(1, "bake", lambda: bake(mesh, s.up_axis, s.meters_per_unit))
+    mesh = step(2, "weld", lambda: weld(mesh))
+    mesh = step(3, "orient", lambda: orient(mesh))
+    mesh = step(4, "bind", lambda: bind(mesh, s.max_influences, s.unweighted))
+    mesh = step(5, "parts", lambda: parts(mesh, s.parts, s.min_part_faces, s.parts_threshold))
+    mesh = step(6, "spheres", lambda: spheres(mesh))
+    assert len(stages) == 7
+    return mesh, reports
+
+
+def import_asset(src, out, settings: ImportSettings | None = None, progress=None) -> ImportResult:
+    """Import the Blender export ``src`` and write the collider asset ``out`` (atomically).
+
+    Raises
+    ------
+    InputError : the input is unusable.
+    OutputError : ``out`` cannot be written.
+    UsageError : invalid settings.
+    """
+    s = settings or ImportSettings()
+    t0 = time.perf_counter()
+    check_output_path(out)  # fail before the expensive work
+    mesh, reports = build_collider(src, s, progress)
+    if progress:
+        progress(7, len(STAGES), "write")
+    t1 = time.perf_counter()
+    provenance = {
+        "source": os.path.basename(os.fspath(src)), "sourceSha256": sha256_of(src),
+        "importer": f"colossus {__version__}", "reader": mesh.source.get("reader", ""),
+        "sourceFrame": mesh.source.get("frame", ""),
+        "settings": {k: ("" if v is None else v) for k, v in asdict(s).items()},
+    }
+    mesh, rep = write(mesh, out, provenance)
+    rep.seconds = time.perf_counter() - t1
+    reports.append(rep)
+    return ImportResult(mesh, reports, time.perf_counter() - t0, os.fspath(out))

@@ -1,0 +1,154 @@
+"""Stage 4, ``bind``: map vertices to bones.
+
+Keeps each vertex's strongest influences up to ``max_influences``, drops negligible weights,
+renormalises to sum 1 and orders joints parents-first.  A vertex with no weight at all is an
+error by default; ``unweighted="nearest-bone"`` gives it to the nearest bone instead.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+from ..model import Clip, SkinnedMesh, parents_first_order
+from ..tolerances import NEGLIGIBLE_WEIGHT
+from . import StageReport
+
+UNWEIGHTED_POLICIES = ("error", "nearest-bone")
+
+
+def nearest_bone(points: np.ndarray, bind: np.ndarray, parents: np.ndarray) -> np.ndarray:
+    """Index of the bone nearest to each point.
+
+    A bone is the segment from a joint's origin to each of its children's origins (a leaf joint
+    is its origin point); distances are measured in the bind pose.
+
+    Parameters
+    ----------
+    points : (n, 3)
+    bind : (b, 4, 4) joint-to-skeleton bind transforms
+    parents : (b,) int
+
+    Returns
+    -------
+    (n,) int64 joint index
+    """
+    heads = bind[:, :3, 3]
+    seg_joint, a, b = [], [], []
+    for j in range(len(parents)):
+        kids = np.nonzero(parents == j)[0]
+        for k in kids if len(kids) else [j]:
+            seg_joint.append(j)
+            a.append(heads[j])
+            b.append(heads[k])
+    a, b, seg_joint = np.array(a), np.array(b), np.array(seg_joint)
+    p = np.asarray(points, dtype=np.float64)
+    best = np.full(len(p), np.inf)
+    out = np.zeros(len(p), dtype=np.int64)
+    for s in range(len(a)):
+        d = b[s] - a[s]
+        dd = float(d @ d)
+        t = np.clip(((p - a[s]) @ d) / dd, 0, 1) if dd > 0 else np.zeros(len(p))
+        dist = np.linalg.norm(p - (a[s] + t[:, None] * d), axis=1)
+        better = dist < best
+        best[better] = dist[better]
+        out[better] = seg_joint[s]
+    return out
+
+
+def bind(mesh: SkinnedMesh, max_influences: int = 4, unweighted: str = "error"):
+    """Limit, clean and normalise skin weights; order joints parents-first.
+
+    Parameters
+    ----------
+    mesh : SkinnedMesh
+    max_influences : int
+        Influences kept per vertex (also the output's ``k``, the USD ``elementSize``).
+    unweighted : {"error", "nearest-bone"}
+
+    Returns
+    -------
+    (SkinnedMesh, StageReport)
+        ``joint_indices``/``joint_weights`` are ``(n, max_influences)``, strongest first,
+        summing to 1; padding entries have joint 0 and weight 0.
+    """
+    if max_influences < 1:
+        raise ValueError(f"max_influences must be >= 1, got {max_influences}")
+    if unweighted not in UNWEIGHTED_POLICIES:
+        raise ValueError(f"unweighted must be one of {UNWEIGHTED_POLICIES}, got {unweighted!r}")
+    n = mesh.vertex_count
+    # -- joints parents-first -------------------------------------------------------------
+    order = parents_first_order(mesh.parents)
+    reordered = not np.array_equal(order, np.arange(len(order)))
+    new_of_old = np.empty_like(order)
+    new_of_old[order] = np.arange(len(order))
+    parents = np.where(mesh.parents[order] < 0, -1, new_of_old[np.maximum(mesh.parents[order], 0)])
+    ji = new_of_old[mesh.joint_indices].astype(np.int64)
+    jw = mesh.joint_weights.astype(np.float64)
+    jw = np.where(jw > 0, jw, 0.0)
+
+    # -- unweighted vertices --------------------------------------------------------------
+    total = jw.sum(axis=1)
+    empty = np.nonzero(total <= 0)[0]
+    assigned = 0
+    if len(empty):
+        if unweighted == "error":
+            path = mesh.source.get("path") or mesh.source.get("file")
+            raise InputError(path, f"{len(empty)} of {n} vertices have no skin weight (first: vertex {int(empty[0])}); "
+                             "use --unweighted nearest-bone to give them to the nearest bone")
+        bones = nearest_bone(mesh.positions[empty] @ mesh.geom_bind[:3, :3].T + mesh.geom_bind[:3, 3],
+                             mesh.bind_transforms[order], parents)
+        ji[empty] = 0
+        jw[empty] = 0
+        ji[empty, 0] = bones
+        jw[empty, 0] = 1.0
+        assigned = len(empty)
+        total = jw.sum(axis=1)
+
+    # -- strongest first, drop negligible and excess, renormalise -------------------------
+    norm = jw / total[:, None]
+    srt = np.argsort(-norm, axis=1, kind="stable")
+    norm = np.take_along_axis(norm, srt, axis=1)
+    ji = np.take_along_axis(ji, srt, axis=1)
+    present = norm > 0
+    negligible = present & (norm < NEGLIGIBLE_WEIGHT)
+    negligible[:, 0] = False  # never drop a vertex's strongest influence
+    keep = present & ~negligible
+    rank = np.cumsum(keep, axis=1)
+    over = keep & (rank > max_influences)
+    keep &= ~over
+    dropped_weight = np.where(over | negligible, norm, 0.0).sum(axis=1)
+    kk = max(max_influences, 1)
+    out_j = np.zeros((n, kk), dtype=np.int32)
+    out_w = np.zeros((n, kk), dtype=np.float64)
+    src_k = ji.shape[1]
+    # kept entries are already sorted strongest first; compact them to the left
+    pos = np.cumsum(keep, axis=1) - 1
+    rows = np.broadcast_to(np.arange(n)[:, None], (n, src_k))
+    sel = keep
+    out_j[rows[sel], pos[sel]] = ji[sel]
+    out_w[rows[sel], pos[sel]] = norm[sel]
+    out_w /= out_w.sum(axis=1, keepdims=True)
+
+    clips = tuple(Clip(c.name, c.times, c.local[:, order]) for c in mesh.clips)
+    out = mesh.replace(
+        joint_indices=out_j, joint_weights=out_w.astype(np.float32),
+        joint_names=tuple(mesh.joint_names[i] for i in order), parents=parents,
+        bind_transforms=mesh.bind_transforms[order], rest_transforms=mesh.rest_transforms[order],
+        clips=clips,
+    )
+    counts = {
+        "joints": len(order), "max_influences": int(max_influences),
+        "source_max_influences": int(np.max(np.count_nonzero(mesh.joint_weights > 0, axis=1))) if n else 0,
+        "influences_dropped": int(np.count_nonzero(over)), "negligible_dropped": int(np.count_nonzero(negligible)),
+        "vertices_trimmed": int(np.count_nonzero(over.any(axis=1))),
+        "max_weight_dropped": round(float(dropped_weight.max()) if n else 0.0, 6),
+        "unweighted_assigned": assigned, "joints_reordered": bool(reordered),
+    }
+    warnings = []
+    if counts["influences_dropped"]:
+        warnings.append(f"{counts['influences_dropped']} influences beyond the strongest {max_influences} dropped "
+                        f"on {counts['vertices_trimmed']} vertices (largest weight lost {counts['max_weight_dropped']:.4f})")
+    if assigned:
+        warnings.append(f"{assigned} unweighted vertices given to their nearest bone")
+    return out, StageReport("bind", counts=counts, warnings=warnings)

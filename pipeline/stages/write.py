@@ -1,0 +1,216 @@
+"""Stage 7, ``write``: the USD collider asset, exactly as ``shared/CONTRACT.md`` lays it out.
+
+Layout (``<Name>`` is the source file's stem made a valid identifier)::
+
+    /<Name>                 SkelRoot (defaultPrim)
+    /<Name>/Skeleton        Skeleton: joints, bindTransforms, restTransforms,
+                            skel:animationSource -> the first clip
+    /<Name>/Collider        Mesh: triangles, rightHanded, UsdSkelBindingAPI (jointIndices /
+                            jointWeights, elementSize = max influences), PhysicsCollisionAPI,
+                            PhysicsMeshCollisionAPI (approximation "none"), colossus:parts:*,
+                            customData["colossus"] = provenance
+    /<Name>/<clip>          SkelAnimation per clip, one time sample per source frame
+
+The file is written to a temporary name in the output directory and renamed into place, so a
+failed import never leaves a partial asset behind.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+
+import numpy as np
+
+from ..errors import OutputError
+from ..model import SkinnedMesh
+from ..xforms import decompose_trs
+from . import StageReport
+
+OUTPUT_EXTENSIONS = (".usda", ".usdc", ".usd")
+RESERVED = ("Skeleton", "Collider")
+
+
+def _ident(name: str, taken: set) -> str:
+    from pxr import Tf
+    base = Tf.MakeValidIdentifier(str(name) or "_")
+    out, i = base, 1
+    while out in taken:
+        i += 1
+        out = f"{base}_{i}"
+    taken.add(out)
+    return out
+
+
+def joint_paths(names, parents) -> list:
+    """UsdSkel joint paths (``"root/spine/neck"``) from joint names and parent indices."""
+    paths, taken = [], {}
+    for j, name in enumerate(names):
+        p = parents[j]
+        prefix = "" if p < 0 else paths[p] + "/"
+        ident = _ident(name, taken.setdefault(prefix, set()))
+        paths.append(prefix + ident)
+    return paths
+
+
+def _mat_array(m: np.ndarray):
+    from pxr import Vt
+    return Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.swapaxes(m, -1, -2)))
+
+
+def check_output_path(out_path) -> str:
+    """Raise :class:`OutputError` unless ``out_path`` can be written; return it as a str."""
+    out = os.fspath(out_path)
+    ext = os.path.splitext(out)[1].lower()
+    if ext not in OUTPUT_EXTENSIONS:
+        raise OutputError(f"{out}: output must end in {', '.join(OUTPUT_EXTENSIONS)}")
+    folder = os.path.dirname(os.path.abspath(out))
+    if not os.path.isdir(folder):
+        raise OutputError(f"{out}: output directory {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputError(f"{out}: output directory {folder} is not writable")
+    if os.path.isdir(out):
+        raise OutputError(f"{out}: is a directory")
+    return out
+
+
+def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
+    """Write ``mesh`` (baked, welded, oriented, bound, with parts and spheres) as a USD asset.
+
+    Parameters
+    ----------
+    mesh : SkinnedMesh
+        Must have ``parts`` with spheres and ``geom_bind`` may be any transform.
+    out_path : str or PathLike
+        ``.usda``, ``.usdc`` or ``.usd`` (binary crate).
+    provenance : dict, optional
+        Stored in the collider mesh's ``customData["colossus"]`` (source, sourceSha256,
+        importer, settings).
+
+    Returns
+    -------
+    (SkinnedMesh, StageReport)
+    """
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdSkel, Vt
+
+    out = check_output_path(out_path)
+    if mesh.parts is None:
+        raise ValueError("write needs a mesh with parts (run the parts and spheres stages)")
+    ext = os.path.splitext(out)[1].lower()
+    folder = os.path.dirname(os.path.abspath(out))
+    fd, tmp = tempfile.mkstemp(prefix=".colossus-", suffix=ext, dir=folder)
+    os.close(fd)
+    os.unlink(tmp)  # Usd.Stage.CreateNew refuses an existing file
+    try:
+        stage = Usd.Stage.CreateNew(tmp)
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if mesh.up_axis == "Y" else UsdGeom.Tokens.z)
+        UsdGeom.SetStageMetersPerUnit(stage, float(mesh.meters_per_unit))
+        stage.SetTimeCodesPerSecond(float(mesh.time_codes_per_second))
+        stage.SetFramesPerSecond(float(mesh.time_codes_per_second))
+        if mesh.clips:
+            stage.SetStartTimeCode(float(min(c.times[0] for c in mesh.clips)))
+            stage.SetEndTimeCode(float(max(c.times[-1] for c in mesh.clips)))
+
+        stem = os.path.basename(str(mesh.source.get("file") or out)).split(".")[0]
+        root_name = _ident(stem or "Collider", set())
+        root_path = Sdf.Path("/" + root_name)
+        root = UsdSkel.Root.Define(stage, root_path)
+        stage.SetDefaultPrim(root.GetPrim())
+
+        # -- skeleton ------------------------------------------------------------------------
+        skel = UsdSkel.Skeleton.Define(stage, root_path.AppendChild("Skeleton"))
+        jpaths = joint_paths(mesh.joint_names, mesh.parents)
+        skel.CreateJointsAttr(Vt.TokenArray(jpaths))
+        skel.CreateJointNamesAttr(Vt.TokenArray(list(mesh.joint_names)))
+        skel.CreateBindTransformsAttr(_mat_array(mesh.bind_transforms))
+        skel.CreateRestTransformsAttr(_mat_array(mesh.rest_transforms))
+
+        # -- clips ---------------------------------------------------------------------------
+        taken = set(RESERVED)
+        clip_paths = []
+        for clip in mesh.clips:
+            name = _ident(clip.name, taken)
+            anim = UsdSkel.Animation.Define(stage, root_path.AppendChild(name))
+            if name != clip.name:
+                anim.GetPrim().SetCustomDataByKey("colossus:clipName", clip.name)
+            anim.CreateJointsAttr(Vt.TokenArray(jpaths))
+            t, q, s = decompose_trs(clip.local)
+            ta, ra, sa = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr(), anim.CreateScalesAttr()
+            qxyzw = np.ascontiguousarray(q[..., [1, 2, 3, 0]], dtype=np.float32)
+            for f, code in enumerate(clip.times):
+                tc = Usd.TimeCode(float(code))
+                ta.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(t[f], dtype=np.float32)), tc)
+                ra.Set(Vt.QuatfArray.FromNumpy(qxyzw[f]), tc)
+                sa.Set(Vt.Vec3hArray.FromNumpy(np.ascontiguousarray(s[f], dtype=np.float16)), tc)
+            clip_paths.append(anim.GetPath())
+        if clip_paths:
+            UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([clip_paths[0]])
+
+        # -- collision mesh ------------------------------------------------------------------
+        geo = UsdGeom.Mesh.Define(stage, root_path.AppendChild("Collider"))
+        pts = np.ascontiguousarray(mesh.positions, dtype=np.float32)
+        geo.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
+        geo.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(mesh.face_count, 3, dtype=np.int32)))
+        geo.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(mesh.triangles.reshape(-1).astype(np.int32)))
+        geo.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+        geo.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        geo.CreateDoubleSidedAttr(False)
+        if len(pts):
+            geo.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*map(float, pts.min(0))), Gf.Vec3f(*map(float, pts.max(0)))]))
+        binding = UsdSkel.BindingAPI.Apply(geo.GetPrim())
+        binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+        k = mesh.joint_indices.shape[1]
+        binding.CreateJointIndicesPrimvar(False, k).Set(Vt.IntArray.FromNumpy(mesh.joint_indices.reshape(-1).astype(np.int32)))
+        binding.CreateJointWeightsPrimvar(False, k).Set(Vt.FloatArray.FromNumpy(mesh.joint_weights.reshape(-1).astype(np.float32)))
+        if not np.allclose(mesh.geom_bind, np.eye(4), rtol=0, atol=1e-12):
+            binding.CreateGeomBindTransformAttr(Gf.Matrix4d(*np.asarray(mesh.geom_bind).T.reshape(-1).tolist()))
+        UsdPhysics.CollisionAPI.Apply(geo.GetPrim())
+        UsdPhysics.MeshCollisionAPI.Apply(geo.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.none)
+
+        parts = mesh.parts
+        prim = geo.GetPrim()
+        T = Sdf.ValueTypeNames
+        prim.CreateAttribute("colossus:parts:joints", T.TokenArray).Set(Vt.TokenArray([jpaths[j] for j in parts.joints]))
+        prim.CreateAttribute("colossus:parts:centers", T.Float3Array).Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(parts.centers, dtype=np.float32)))
+        prim.CreateAttribute("colossus:parts:radii", T.FloatArray).Set(Vt.FloatArray.FromNumpy(np.ascontiguousarray(parts.radii, dtype=np.float32)))
+        prim.CreateAttribute("colossus:parts:faceOffsets", T.IntArray).Set(Vt.IntArray.FromNumpy(parts.face_offsets.astype(np.int32)))
+        prim.CreateAttribute("colossus:parts:faces", T.IntArray).Set(Vt.IntArray.FromNumpy(parts.faces.astype(np.int32)))
+        if provenance:
+            prim.SetCustomDataByKey("colossus", _plain(provenance))
+        stage.GetRootLayer().documentation = f"Collider asset written by colossus from {mesh.source.get('file', '?')}"
+        stage.GetRootLayer().Save()
+        del stage
+        os.replace(tmp, out)
+    except OSError as exc:
+        _unlink(tmp)
+        raise OutputError(f"{out}: cannot write ({exc.strerror or exc})") from None
+    except BaseException:
+        _unlink(tmp)
+        raise
+    size = os.path.getsize(out)
+    return mesh, StageReport("write", counts={"path": out, "bytes": size, "clips": len(mesh.clips),
+                                              "joints": mesh.joint_count, "parts": len(parts)})
+
+
+def _plain(d):
+    """Provenance made of types USD dictionaries hold (str, float, int, bool, nested dicts)."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out[str(k)] = _plain(v)
+        elif isinstance(v, (bool, int, float, str)):
+            out[str(k)] = v
+        elif v is None:
+            out[str(k)] = ""
+        elif isinstance(v, (list, tuple)):
+            out[str(k)] = ", ".join(str(x) for x in v)
+        else:
+            out[str(k)] = str(v)
+    return out
+
+
+def _unlink(p):
+    try:
+        os.unlink(p)
+    except OSError:
+        pass
