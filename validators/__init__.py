@@ -1,0 +1,24 @@
+"""colossus validators: prove collider assets correct (``colossus validate``).
+
+Public API::
+
+    from validators import check_asset
+    report = check_asset("boss.usda", select=None, ignore=["COL404"], subframes=2)
+    report.passed, report.findings   # Finding(code, severity, message, rule, location)
+
+and the frame-proof kernels in :mod:`validators.frameproof` (``skin_frames``,
+``part_farthest``, ``skinning_transforms``, ``world_spheres``, ``prove``).
+"""
+
+from .findings import AssetReport, Finding
+from .registry import RuleSelector, all_rules, get_rule
+
+
+def check_asset(path_or_stage, select=None, ignore=None, severities=None, **options):
+    from .runner import check_asset as _check
+    return _check(path_or_stage, select=select, ignore=ignore, severities=severities, **options)
+
+
+check_asset.__doc__ = """Run every selected rule on one asset (see :func:`validators.runner.check_asset`)."""
+
+__all__ = ["check_asset", "AssetReport", "Finding", "RuleSelector", "all_rules", "get_rule"]

@@ -1,0 +1,180 @@
+"""The frame-proof kernels against readable numpy and against plain usd-core skinning."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pxr import Gf, Usd, UsdSkel, Vt
+
+from usd_fixture import build_test_stage, clip_skel, naive_skin, open_copy
+from validators import frameproof as fp
+from validators.asset import LoadedAsset
+
+
+@pytest.fixture(scope="module")
+def asset():
+    return LoadedAsset(build_test_stage())
+
+
+def _random_rig(rng, n=300, b=6, k=4, f=5):
+    pts = rng.normal(size=(n, 3)).astype(np.float32)
+    ji = rng.integers(0, b, size=(n, k)).astype(np.int32)
+    jw = rng.random((n, k)).astype(np.float32)
+    jw[:, -1] = 0
+    jw /= jw.sum(1, keepdims=True)
+    m = np.repeat(np.eye(4)[None, None], f, 0).repeat(b, 1)
+    m[..., :3, :3] += 0.3 * rng.normal(size=(f, b, 3, 3))
+    m[..., :3, 3] = rng.normal(size=(f, b, 3))
+    return pts, ji, jw, m
+
+
+def test_skin_frames_matches_numpy_reference():
+    rng = np.random.default_rng(1)
+    pts, ji, jw, m = _random_rig(rng)
+    got = fp.skin_frames(pts, ji, jw, m)
+    ref = naive_skin(pts, ji, jw, m, np.eye(4)[None].repeat(m.shape[1], 0))
+    assert got.dtype == np.float32 and got.shape == ref.shape
+    np.testing.assert_allclose(got, ref, atol=1e-5)
+
+
+def test_part_farthest_matches_numpy_reference():
+    rng = np.random.default_rng(2)
+    pts, ji, jw, m = _random_rig(rng)
+    poff = np.array([0, 10, 10, 200])
+    pv = rng.choice(len(pts), size=200, replace=True).astype(np.int32)
+    centers = rng.normal(size=(m.shape[0], 3, 3))
+    d, v = fp.part_farthest(pts, ji, jw, m, poff, pv, centers)
+    sk = naive_skin(pts, ji, jw, m, np.eye(4)[None].repeat(m.shape[1], 0))
+    for f in range(m.shape[0]):
+        for p in range(3):
+            verts = pv[poff[p]:poff[p + 1]]
+            if len(verts) == 0:
+                assert d[f, p] == 0 and v[f, p] == -1
+                continue
+            dist = np.linalg.norm(sk[f, verts] - centers[f, p], axis=1)
+            assert d[f, p] == pytest.approx(dist.max(), abs=1e-5)
+            assert np.linalg.norm(sk[f, v[f, p]] - centers[f, p]) == pytest.approx(dist.max(), abs=1e-5)
+
+
+def test_wrappers_validate_inputs():
+    rng = np.random.default_rng(3)
+    pts, ji, jw, m = _random_rig(rng)
+    with pytest.raises(ValueError, match="joint_weights"):
+        fp.skin_frames(pts, ji, jw[:, :2], m)
+    with pytest.raises(ValueError, match="joint_indices"):
+        fp.skin_frames(pts, ji + 100, jw, m)
+    with pytest.raises(ValueError, match="centers"):
+        fp.part_farthest(pts, ji, jw, m, [0, 1], [0], np.zeros((1, 1, 3)))
+
+
+def test_nan_vertex_counts_as_infinitely_far():
+    pts = np.array([[0, 0, 0], [np.nan, 0, 0]], np.float32)
+    ji = np.zeros((2, 1), np.int32)
+    jw = np.ones((2, 1), np.float32)
+    d, v = fp.part_farthest(pts, ji, jw, np.eye(4)[None, None], [0, 2], [0, 1], np.zeros((1, 1, 3)))
+    assert np.isinf(d[0, 0]) and v[0, 0] == 1
+
+
+def _usd_skin(stage, times):
+    """Plain usd-core: SkinningQuery + SkelQuery of the bound clip -> (f, n, 3) world points."""
+    cache = UsdSkel.Cache()
+    root = UsdSkel.Root(stage.GetDefaultPrim())
+    cache.Populate(root, Usd.TraverseInstanceProxies())
+    skel = UsdSkel.Skeleton(stage.GetPrimAtPath("/Tube/Skeleton"))
+    sq = cache.GetSkelQuery(skel)
+    mesh = stage.GetPrimAtPath("/Tube/Collider")
+    skq = cache.GetSkinningQuery(mesh)
+    pts0 = mesh.GetAttribute("points").Get()
+    out = []
+    for t in times:
+        xf = sq.ComputeSkinningTransforms(Usd.TimeCode(t))
+        p = Vt.Vec3fArray(pts0)
+        assert skq.ComputeSkinnedPoints(xf, p, Usd.TimeCode(t))
+        out.append(np.array(p))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("geom_bind", [None, "scaled"])
+def test_proof_skinning_agrees_with_usd_skinning_query(geom_bind):
+    gb = None
+    if geom_bind:
+        gb = np.eye(4)
+        gb[:3, :3] *= 1.5
+        gb[:3, 3] = [0.2, -0.4, 0.1]
+    stage = build_test_stage(geom_bind=gb)
+    a = LoadedAsset(stage)
+    clip = a.clips[0]  # the bound animationSource
+    skel = a.skel_transforms(a.anim_local(clip, clip.times))
+    ours = fp.skin_frames(a.points, a.jidx, a.jw,
+                          fp.skinning_transforms(skel, a.inv_bind, a.geom_bind, a.skel_world))
+    ref = _usd_skin(stage, clip.times)
+    np.testing.assert_allclose(ours, ref, atol=2e-5)
+
+
+def test_proof_skinning_agrees_with_skin_points_lbs_on_unbound_clip(asset):
+    clip = next(c for c in asset.clips if c.name == "twist")
+    skel = asset.skel_transforms(asset.anim_local(clip, clip.times))
+    # independent: the fixture's own transforms
+    times, skel_ref = clip_skel("twist", 12)
+    np.testing.assert_array_equal(clip.times, times)
+    np.testing.assert_allclose(skel, skel_ref, atol=1e-6)
+    ours = fp.skin_frames(asset.points, asset.jidx, asset.jw,
+                          fp.skinning_transforms(skel, asset.inv_bind, asset.geom_bind, asset.skel_world))
+    for f in range(len(times)):
+        xf = Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray((skel[f] @ asset.inv_bind).transpose(0, 2, 1)))
+        p = Vt.Vec3fArray.FromNumpy(asset.points)
+        UsdSkel.SkinPointsLBS(Gf.Matrix4d(1), xf, Vt.IntArray.FromNumpy(asset.jidx.ravel()),
+                              Vt.FloatArray.FromNumpy(asset.jw.ravel()), asset.k, p)
+        np.testing.assert_allclose(ours[f], np.array(p), atol=2e-5)
+
+
+def test_chunking_does_not_change_the_result(asset):
+    whole = fp.prove(asset, chunk_frames=1000)
+    tiny = fp.prove(asset, chunk_frames=5)
+    one = fp.prove(asset, chunk_frames=1)
+    for a, b, c in zip(whole.results, tiny.results, one.results):
+        assert (a.excess, a.time, a.vertex) == (b.excess, b.time, b.vertex) == (c.excess, c.time, c.vertex)
+    np.testing.assert_array_equal(whole.tightest, tiny.tightest)
+
+
+def test_chunk_size_bounds_memory():
+    # a 100,000-vertex, 2,000-frame asset: the proof holds at most one chunk of joint matrices,
+    # never the (2000, 100000, 3) skinned points.
+    c = fp.chunk_size(joint_count=200, part_count=200)
+    assert 1 <= c <= 256
+    assert c * 200 * 16 * 8 * 3 <= 32 * 1024 * 1024
+
+
+def test_subframes_check_in_between_times(asset):
+    p0 = fp.prove(asset)
+    p3 = fp.prove(asset, subframes=3)
+    assert p0.subframe_times == 0 and p3.subframe_times == 3 * (23 + 11)
+    assert p3.frames == p0.frames == 36
+    assert any("in-between" in s for s in p0.not_checked)
+    assert any("3 in-between" in s for s in p3.checked)
+    times, fidx, is_sub = fp.clip_times(np.array([0.0, 1.0, 2.0]), 3)
+    np.testing.assert_allclose(times, [0, 0.25, 0.5, 0.75, 1, 1.25, 1.5, 1.75, 2])
+    np.testing.assert_array_equal(fidx, [0, 0, 0, 0, 1, 1, 1, 1, 2])
+    np.testing.assert_array_equal(is_sub, [0, 1, 1, 1, 0, 1, 1, 1, 0])
+
+
+def test_subframes_catch_a_failure_between_frames():
+    """Frames at +-0.9 rad, straight in between; off-axis sphere centres with radii exactly as
+    tight as the frames allow, so only the in-between (straight) pose fails."""
+    from validators import check_asset
+    stage = build_test_stage(clips=(("swing", 2),))
+    col = stage.GetPrimAtPath("/Tube/Collider")
+    c = np.array(col.GetAttribute("colossus:parts:centers").Get())
+    c[:] = [0.5, 0.5, 0]  # off-axis centres: the straight pose is farthest from them
+    col.GetAttribute("colossus:parts:centers").Set(Vt.Vec3fArray.FromNumpy(c.astype(np.float32)))
+    tight = fp.prove(LoadedAsset(stage)).tightest
+    col.GetAttribute("colossus:parts:radii").Set(Vt.FloatArray.FromNumpy((tight * (1 + 1e-6) + 1e-5).astype(np.float32)))
+    r0 = check_asset(stage, subframes=0, select=["COL403"])
+    assert r0.passed, [f.message for f in r0.findings]
+    assert r0.stats["frameproof"]["subframe_times"] == 0
+    r1 = check_asset(stage, subframes=1, select=["COL403"])
+    assert r1.stats["frameproof"]["subframe_times"] == 1
+    fs = r1.by_code("COL403")
+    assert fs, "the in-between pose must be caught"
+    assert {f.time for f in fs} == {0.5} and {f.frame for f in fs} == {0}
+    assert "1 in-between" in r1.stats["frameproof"]["checked"][1]

@@ -1,0 +1,408 @@
+"""Every rule: a broken asset (a good one edited with pxr) that fails it, and the good one that passes."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdSkel, Vt
+
+from usd_fixture import build_test_stage, open_copy, write_test_asset
+from validators import all_rules, check_asset
+
+MESH, SKEL, ROOT = "/Tube/Collider", "/Tube/Skeleton", "/Tube"
+
+
+@pytest.fixture(scope="module")
+def good_path(tmp_path_factory):
+    return write_test_asset(tmp_path_factory.mktemp("good") / "tube.usda")
+
+
+@pytest.fixture(scope="module")
+def good_report(good_path):
+    return check_asset(good_path)
+
+
+def _attr(s, path, name):
+    return s.GetPrimAtPath(path).GetAttribute(name)
+
+
+def _edit(s, path, name, fn, time=Usd.TimeCode.Default()):
+    """Apply ``fn`` to the attribute's value as a numpy array and write it back."""
+    a = _attr(s, path, name)
+    v = a.Get(time)
+    arr = np.array(v)
+    out = fn(arr.copy())
+    a.Set(type(v).FromNumpy(out) if hasattr(type(v), "FromNumpy") else type(v)(out.tolist()), time)
+
+
+def _set_item(i, value):
+    def f(a):
+        a[i] = value
+        return a
+    return f
+
+
+def _weights(s, fn):
+    pv = UsdSkel.BindingAPI(s.GetPrimAtPath(MESH)).GetJointWeightsPrimvar()
+    k = pv.GetElementSize()
+    w = np.array(pv.Get()).reshape(-1, k)
+    pv.Set(Vt.FloatArray.FromNumpy(fn(w).astype(np.float32).ravel()))
+
+
+def _indices(s, fn):
+    pv = UsdSkel.BindingAPI(s.GetPrimAtPath(MESH)).GetJointIndicesPrimvar()
+    k = pv.GetElementSize()
+    w = np.array(pv.Get()).reshape(-1, k)
+    pv.Set(Vt.IntArray.FromNumpy(fn(w).astype(np.int32).ravel()))
+
+
+def _mat_edit(s, name, j, fn):
+    a = _attr(s, SKEL, name)
+    m = list(a.Get())
+    m[j] = fn(Gf.Matrix4d(m[j]))
+    a.Set(Vt.Matrix4dArray(m))
+
+
+def _tris(s, fn):
+    _edit(s, MESH, "faceVertexIndices", lambda a: fn(a.reshape(-1, 3)).ravel().astype(np.int32))
+
+
+def _clip_attr_edit(s, clip, name, time, fn):
+    a = _attr(s, f"{ROOT}/{clip}", name)
+    v = list(a.Get(time))
+    fn(v)
+    a.Set(type(a.Get(time))(v), time)
+
+
+# ---------------------------------------------------------------------------- breakers
+def b101(s):
+    UsdSkel.BindingAPI.Apply(UsdGeom.Xform.Define(s, "/Other").GetPrim())
+
+
+def b103(s):
+    s.GetRootLayer().pseudoRoot.ClearInfo("metersPerUnit")
+
+
+def b104(s):
+    UsdSkel.Root.Define(s, "/Other")
+
+
+def b105(s):
+    a = _attr(s, SKEL, "bindTransforms")
+    a.Set(Vt.Matrix4dArray(list(a.Get())[:2]))
+
+
+def b106(s):
+    UsdPhysics.MeshCollisionAPI(s.GetPrimAtPath(MESH)).GetApproximationAttr().Set("convexHull")
+
+
+def b107(s):
+    s.GetPrimAtPath(MESH).RemoveProperty("colossus:parts:radii")
+
+
+def b108(s):
+    _edit(s, MESH, "colossus:parts:radii", lambda a: a[:2])
+
+
+def b109(s):
+    _attr(s, MESH, "colossus:parts:joints").Set(["root", "root/nope", "root/mid/tip"])
+
+
+def b110(s):
+    s.GetPrimAtPath(MESH).ClearCustomDataByKey("colossus")
+
+
+def b201(s):
+    _edit(s, MESH, "faceVertexCounts", lambda a: np.r_[4, 2, a[2:]].astype(np.int32))
+
+
+def b202(s):
+    _edit(s, MESH, "faceVertexIndices", _set_item(0, 100000))
+
+
+def b203(s):
+    _edit(s, MESH, "points", _set_item(5, np.nan))
+
+
+def b204(s):
+    _tris(s, lambda t: (t.__setitem__((0, 2), t[0, 0]), t)[1])
+
+
+def b205(s):
+    _edit(s, MESH, "points", lambda a: np.vstack([a, [[9, 9, 9]]]).astype(np.float32))
+
+
+def b206(s):
+    _edit(s, MESH, "points", lambda a: (a.__setitem__(1, a[0]), a)[1])
+
+
+def b207(s):
+    def f(t):
+        extra = np.array([[t[0, 0], t[0, 1], t.max()]])
+        return np.vstack([t, extra])
+    _tris(s, f)
+    _edit(s, MESH, "faceVertexCounts", lambda a: np.r_[a, 3].astype(np.int32))
+
+
+def b208(s):
+    _tris(s, lambda t: (t.__setitem__(5, t[5, ::-1]), t)[1])
+
+
+def b209(s):
+    _tris(s, lambda t: t[:, ::-1].copy())
+
+
+def b302(s):
+    _weights(s, lambda w: (w.__setitem__(0, [1.2, -0.2, 0, 0]), w)[1])
+
+
+def b303(s):
+    _weights(s, lambda w: (w.__setitem__(0, w[0] * 0.5), w)[1])
+
+
+def b304(s):
+    _indices(s, lambda j: (j.__setitem__((0, 0), 7), j)[1])
+
+
+def b305(s):
+    _weights(s, lambda w: (w.__setitem__(0, 0), w)[1])
+
+
+def b306(s):
+    _attr(s, SKEL, "joints").Set(["root/mid", "root", "root/mid/tip"])
+
+
+def b307(s):
+    _mat_edit(s, "bindTransforms", 1, lambda m: m.SetScale(Gf.Vec3d(1, 0, 1)) and None or m)
+
+
+def b308(s):
+    _mat_edit(s, "restTransforms", 1, lambda m: m.SetTranslateOnly(Gf.Vec3d(0, 1.5, 0)))
+
+
+def b309(s):
+    UsdSkel.BindingAPI(s.GetPrimAtPath(MESH)).GetJointWeightsPrimvar().SetInterpolation("constant")
+
+
+def b310(s):
+    pv = UsdSkel.BindingAPI(s.GetPrimAtPath(MESH)).GetJointWeightsPrimvar()
+    w = np.array(pv.Get()).reshape(-1, 4)
+    v = int(np.argmax((w[:, 1] > 0.1) & (w[:, 1] < w[:, 0])))
+    _weights(s, lambda w: (w.__setitem__((v, slice(0, 2)), w[v, 1::-1]), w)[1])
+    _indices(s, lambda j: (j.__setitem__((v, slice(0, 2)), j[v, 1::-1]), j)[1])
+
+
+def b401(s):
+    _edit(s, MESH, "colossus:parts:faces", lambda a: a[:-1].astype(np.int32))
+    _edit(s, MESH, "colossus:parts:faceOffsets", lambda a: (a.__setitem__(-1, a[-1] - 1), a)[1].astype(np.int32))
+
+
+def b402(s):
+    _edit(s, MESH, "colossus:parts:centers", lambda a: (a.__setitem__(0, a[0] + [5, 0, 0]), a)[1].astype(np.float32))
+
+
+def b403(s):
+    # frame 10 of "bend": the tip joint jumps 2 units along its bone; vertices shared with mid lag behind.
+    _clip_attr_edit(s, "bend", "translations", 10, lambda v: v.__setitem__(2, Gf.Vec3f(0, 3, 0)))
+
+
+def b404(s):
+    _edit(s, MESH, "colossus:parts:radii", lambda a: (a * 3).astype(np.float32))
+
+
+def b405(s):
+    _edit(s, MESH, "colossus:parts:radii", _set_item(1, 0.0))
+
+
+def b406(s):
+    p = s.GetPrimAtPath(MESH)
+    _attr(s, MESH, "colossus:parts:joints").Set(list(p.GetAttribute("colossus:parts:joints").Get()) + ["root"])
+    _edit(s, MESH, "colossus:parts:centers", lambda a: np.vstack([a, [[0, 0, 0]]]).astype(np.float32))
+    _edit(s, MESH, "colossus:parts:radii", lambda a: np.r_[a, 0.5].astype(np.float32))
+    _edit(s, MESH, "colossus:parts:faceOffsets", lambda a: np.r_[a, a[-1]].astype(np.int32))
+
+
+def b501(s):
+    UsdSkel.Animation.Define(s, f"{ROOT}/idle").CreateJointsAttr(["root", "root/mid", "root/mid/tip"])
+
+
+def b502(s):
+    a = _attr(s, f"{ROOT}/bend", "translations")
+    a.Set(a.Get(12), 12.5)
+
+
+def b503(s):
+    _clip_attr_edit(s, "bend", "rotations", 5, lambda v: v.__setitem__(1, Gf.Quatf(float("nan"), 0, 0, 0)))
+
+
+def b504(s):
+    UsdSkel.Animation.Define(s, f"{SKEL}/bend").CreateJointsAttr(["root", "root/mid", "root/mid/tip"])
+
+
+def b505(s):
+    _attr(s, f"{ROOT}/bend", "joints").Set(["root", "root/mid/tip", "root/mid"])
+
+
+def b506(s):
+    s.RemovePrim(f"{ROOT}/bend")
+    s.RemovePrim(f"{ROOT}/twist")
+    s.GetPrimAtPath(SKEL).GetRelationship("skel:animationSource").ClearTargets(True)
+
+
+def b507(s):
+    UsdSkel.Animation.Define(s, f"{SKEL}/extra").CreateJointsAttr(["root", "root/mid", "root/mid/tip"])
+
+
+def b508(s):
+    s.GetPrimAtPath(SKEL).GetRelationship("skel:animationSource").SetTargets([Sdf.Path(f"{ROOT}/twist")])
+
+
+BREAKERS = {int(name[1:]): fn for name, fn in globals().items() if name.startswith("b") and name[1:].isdigit()}
+BREAKERS = {f"COL{k:03d}": v for k, v in BREAKERS.items()}
+#: Codes whose failing fixture is not an edited stage (files on disk, options, a crashing rule).
+SPECIAL = {"COL001", "COL002", "COL003", "COL102", "COL301"}
+
+
+def test_good_asset_is_clean(good_report):
+    assert good_report.passed
+    assert good_report.findings == [], [f.message for f in good_report.findings]
+    assert good_report.skipped == {}
+
+
+def test_every_code_has_a_failing_fixture():
+    codes = {r.code for r in all_rules()}
+    assert codes == set(BREAKERS) | SPECIAL, sorted(codes ^ (set(BREAKERS) | SPECIAL))
+
+
+@pytest.mark.parametrize("code", sorted(BREAKERS))
+def test_rule_fails_broken_asset_and_passes_good(code, good_path, good_report):
+    assert code not in good_report.codes()
+    stage = open_copy(good_path)
+    BREAKERS[code](stage)
+    report = check_asset(stage)
+    assert code in report.codes(), (code, [(f.code, f.message) for f in report.findings], report.skipped)
+    assert not any(f.code == "COL002" for f in report.findings), [f.message for f in report.by_code("COL002")]
+    f = report.by_code(code)[0]
+    assert f.severity == next(r.severity for r in all_rules() if r.code == code)
+    assert f.message and f.rule
+
+
+def test_col001_corrupt_and_truncated(tmp_path, good_path):
+    rnd = tmp_path / "random.usdc"
+    rnd.write_bytes(os.urandom(4096))
+    bad_text = tmp_path / "garbage.usda"
+    bad_text.write_text("#usda 1.0\n(\n  upAxis = \ndef Mesh \"x\" {{{{\n")
+    usdc = tmp_path / "good.usdc"
+    Usd.Stage.Open(good_path).Export(str(usdc))
+    data = usdc.read_bytes()
+    trunc = tmp_path / "truncated.usdc"
+    trunc.write_bytes(data[: len(data) // 2])
+    for p in (rnd, bad_text, trunc):
+        r = check_asset(p)
+        assert [f.code for f in r.findings] == ["COL001"], (p, r.findings)
+        assert not r.passed
+    assert check_asset(usdc).passed
+
+
+def test_col002_checker_error_is_kept_apart(monkeypatch, good_path):
+    from validators import registry
+
+    def boom(asset, ctx):
+        raise ZeroDivisionError("kaboom")
+        yield
+
+    monkeypatch.setitem(registry._RULES, "COL205", dataclasses.replace(registry._RULES["COL205"], func=boom))
+    r = check_asset(good_path)
+    assert r.codes() == {"COL002"}
+    f = r.findings[0]
+    assert "COL205" in f.message and "kaboom" in f.message and f.validator == "COL205"
+    assert "COL403" in r.rules_run  # the other rules still ran
+
+
+def test_col003_missing_path(tmp_path):
+    r = check_asset(tmp_path / "nope.usda")
+    assert r.codes() == {"COL003"} and not r.passed
+
+
+def test_col102_usd_validation_warnings_pass_through(monkeypatch, good_path):
+    from validators.rules import structure
+    monkeypatch.setattr(structure, "_usd_validation",
+                        lambda asset: [("Warn", "some:Validator.Thing", "a note", ["/Tube"])])
+    r = check_asset(good_path)
+    assert r.codes() == {"COL102"} and r.passed
+    assert r.findings[0].validator == "some:Validator.Thing" and r.findings[0].prim == "/Tube"
+
+
+def test_col301_max_influences(good_path):
+    r = check_asset(good_path, max_influences=2)
+    assert r.codes() == {"COL301"}
+    assert check_asset(good_path, max_influences=4).codes() == set()
+    wide = build_test_stage(max_influences=6)
+    assert "COL301" in check_asset(wide).codes()
+    assert check_asset(wide, max_influences=6).passed
+
+
+def test_col403_names_clip_frame_part_joint_vertex_excess(good_path):
+    stage = open_copy(good_path)
+    b403(stage)
+    r = check_asset(stage)
+    fs = r.by_code("COL403")
+    assert fs and not r.passed
+    f = fs[0]
+    assert f.clip == "bend" and f.time == 10 and f.frame == 10
+    assert f.joint in ("root/mid", "root/mid/tip") and f.part in (1, 2)
+    assert f.vertex >= 0 and f.excess > 0 and 0 < f.fraction
+    assert f.count == 1  # only frame 10 fails
+    excess = [x.excess for x in fs]
+    assert excess == sorted(excess, reverse=True)  # worst first
+    assert "COL403" in r.rules_run and "twist" not in {x.clip for x in fs}
+
+
+def test_col404_reports_ratio(good_path):
+    stage = open_copy(good_path)
+    b404(stage)
+    fs = check_asset(stage).by_code("COL404")
+    assert len(fs) == 3 and all(2.9 < f.ratio < 3.2 for f in fs)
+    stage = open_copy(good_path)
+    b404(stage)
+    assert check_asset(stage, slack_ratio=4).by_code("COL404") == []
+
+
+def test_shrunk_spheres_fail_somewhere():
+    r = check_asset(build_test_stage(radius_scale=0.9))
+    assert {"COL402", "COL403"} <= r.codes()
+
+
+def test_geom_bind_transform_is_honoured():
+    gb = np.eye(4)
+    gb[:3, :3] *= 2.0
+    gb[:3, 3] = [0.5, -1, 0.25]
+    r = check_asset(build_test_stage(geom_bind=gb))
+    assert r.findings == [], [f.message for f in r.findings]
+
+
+def test_select_ignore_longest_prefix_wins(good_path):
+    stage = open_copy(good_path)
+    b404(stage)
+    b110(stage)
+    assert check_asset(stage).codes() == {"COL404", "COL110"}
+    assert check_asset(stage, ignore=["COL4"]).codes() == {"COL110"}
+    assert check_asset(stage, select=["COL4"]).codes() == {"COL404"}
+    assert check_asset(stage, select=["COL404"], ignore=["COL4"]).codes() == {"COL404"}
+    assert check_asset(stage, select=["COL4"], ignore=["COL40"]).codes() == set()
+    r = check_asset(stage, severities={"COL404": "error"})
+    assert not r.passed and r.by_code("COL404")[0].severity == "error"
+    with pytest.raises(ValueError):
+        check_asset(stage, select=["COL9"])
+
+
+def test_broken_prerequisite_skips_dependent_rules_with_reason(good_path):
+    stage = open_copy(good_path)
+    b107(stage)
+    r = check_asset(stage)
+    assert "COL107" in r.codes()
+    assert "COL403" in r.skipped and "radii" in r.skipped["COL403"]
+    assert r.stats["frameproof"]["not_checked"]

@@ -1,0 +1,463 @@
+"""The loaded asset: read once with usd-core into numpy arrays, shared by every rule.
+
+Reading never raises for a malformed asset: a missing or malformed piece is ``None`` (or an
+empty array), :meth:`LoadedAsset.ready` says whether what a rule needs is usable, and the
+structure rules report why it is not.
+
+Conventions (as ``pipeline.model``): matrices are ``float64`` 4x4 in the **column-vector**
+convention ``p' = M @ p`` (``Gf.Matrix4d`` is the transpose); geometry is ``float32``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel
+
+from . import tolerances as tol
+
+CLIP_ATTRS = ("translations", "rotations", "scales")
+
+
+def _mats(value) -> np.ndarray | None:
+    """A ``VtMatrix4dArray`` (row-vector) -> ``(b, 4, 4)`` float64 column-vector, or None."""
+    if value is None:
+        return None
+    a = np.array(value, dtype=np.float64)
+    if a.ndim != 3 or a.shape[1:] != (4, 4):
+        return None
+    return np.ascontiguousarray(a.transpose(0, 2, 1))
+
+
+def _mat(value) -> np.ndarray:
+    return np.ascontiguousarray(np.array(value, dtype=np.float64).T)
+
+
+@dataclass
+class Clip:
+    """One SkelAnimation prim.
+
+    Attributes
+    ----------
+    name : str
+    prim : Usd.Prim
+    times : (f,) float64
+        Its frames: the sorted union of the time samples of translations, rotations, scales.
+    joints : list of str
+        The animation's ``joints``.
+    """
+
+    name: str
+    prim: Usd.Prim
+    times: np.ndarray
+    joints: list
+
+
+def open_stage(path: str) -> Usd.Stage:
+    """Open ``path`` fresh (reloading a layer usd-core already holds), raising on failure."""
+    layer = Sdf.Layer.Find(path)
+    if layer is not None:
+        layer.Reload(force=True)
+    stage = Usd.Stage.Open(path, Usd.Stage.LoadAll)
+    if stage is None:
+        raise RuntimeError(f"usd-core could not open {path}")
+    return stage
+
+
+class LoadedAsset:
+    """A collider asset read into numpy arrays.
+
+    Attributes (each ``None`` when absent or malformed)
+    ----------
+    stage : Usd.Stage
+    skel_roots, skeletons, meshes, animations : list of Usd.Prim found anywhere on the stage
+    root : Usd.Prim          the SkelRoot (the default prim if it is one, else the first)
+    skeleton : Usd.Prim      the Skeleton under ``root``
+    mesh : Usd.Prim          the collider Mesh under ``root`` (named ``Collider`` if several)
+    joints : list of str, length b
+    parents : (b,) int32     parent joint index, -1 for roots (from ``UsdSkel.Topology``)
+    bind : (b, 4, 4) float64 joint -> skeleton space at bind time
+    rest : (b, 4, 4) float64 joint-local rest transforms
+    skel_world : (4, 4) float64  the Skeleton prim's local-to-world transform
+    points : (n, 3) float32
+    face_counts : (F,) int32, face_indices : (sum,) int32
+    tris : (F, 3) int32      only when every face is a triangle with in-range indices
+    jidx : (n, k) int32, jw : (n, k) float32, k : int  skin influences
+    geom_bind : (4, 4) float64
+    part_joints : list of str, part_centers : (P, 3) float32, part_radii : (P,) float32,
+    part_offsets : (P + 1,) int64, part_faces : (sum,) int64
+    clips : list of Clip     SkelAnimation prims that are direct children of ``root``
+    """
+
+    def __init__(self, stage: Usd.Stage, path: str = ""):
+        self.stage = stage
+        self.path = path or stage.GetRootLayer().identifier
+        self._read_prims()
+        self._read_skeleton()
+        self._read_mesh()
+        self._read_skin()
+        self._read_parts()
+        self._read_clips()
+
+    # -- reading ---------------------------------------------------------------------------
+    def _read_prims(self):
+        self.skel_roots, self.skeletons, self.meshes, self.animations = [], [], [], []
+        for prim in self.stage.Traverse():
+            if prim.IsA(UsdSkel.Root):
+                self.skel_roots.append(prim)
+            elif prim.IsA(UsdSkel.Skeleton):
+                self.skeletons.append(prim)
+            elif prim.IsA(UsdGeom.Mesh):
+                self.meshes.append(prim)
+            elif prim.IsA(UsdSkel.Animation):
+                self.animations.append(prim)
+        dp = self.stage.GetDefaultPrim()
+        if dp and dp.IsA(UsdSkel.Root):
+            self.root = dp
+        else:
+            self.root = self.skel_roots[0] if self.skel_roots else None
+        under = (lambda p: self.root is not None and p.GetPath().HasPrefix(self.root.GetPath()))
+        skels = [p for p in self.skeletons if under(p)]
+        self.skeleton = skels[0] if skels else None
+        meshes = [p for p in self.meshes if under(p)]
+        named = [p for p in meshes if p.GetName() == "Collider"]
+        self.mesh = named[0] if named else (meshes[0] if meshes else None)
+
+    def _read_skeleton(self):
+        self.joints = self.parents = self.bind = self.rest = None
+        self.topology_error = None
+        self.skel_world = np.eye(4)
+        if self.skeleton is None:
+            return
+        skel = UsdSkel.Skeleton(self.skeleton)
+        joints = skel.GetJointsAttr().Get()
+        self.joints = [str(j) for j in joints] if joints is not None else None
+        self.bind = _mats(skel.GetBindTransformsAttr().Get())
+        self.rest = _mats(skel.GetRestTransformsAttr().Get())
+        if self.joints is not None:
+            topo = UsdSkel.Topology(self.joints)
+            ok, why = topo.Validate()
+            self.parents = np.array(topo.GetParentIndices(), dtype=np.int32)
+            if not ok:
+                self.topology_error = why
+        self.skel_world = _mat(UsdGeom.Xformable(self.skeleton).ComputeLocalToWorldTransform(
+            Usd.TimeCode.Default()))
+
+    def _read_mesh(self):
+        self.points = self.face_counts = self.face_indices = self.tris = None
+        if self.mesh is None:
+            return
+        m = UsdGeom.Mesh(self.mesh)
+        pts = m.GetPointsAttr().Get()
+        if pts is not None:
+            a = np.array(pts, dtype=np.float32)
+            self.points = a.reshape(-1, 3) if a.size else np.zeros((0, 3), np.float32)
+        c = m.GetFaceVertexCountsAttr().Get()
+        i = m.GetFaceVertexIndicesAttr().Get()
+        self.face_counts = np.array(c, dtype=np.int64) if c is not None else None
+        self.face_indices = np.array(i, dtype=np.int64) if i is not None else None
+        self.orientation = m.GetOrientationAttr().Get()
+        if (self.points is not None and self.face_counts is not None and self.face_indices is not None
+                and np.all(self.face_counts == 3) and len(self.face_indices) == 3 * len(self.face_counts)
+                and (len(self.face_indices) == 0 or (self.face_indices.min() >= 0
+                                                     and self.face_indices.max() < len(self.points)))):
+            self.tris = self.face_indices.reshape(-1, 3).astype(np.int32)
+
+    def _read_skin(self):
+        self.jidx = self.jw = None
+        self.k = 0
+        self.skin_error = None
+        self.geom_bind = np.eye(4)
+        self.mesh_skeleton_targets = []
+        if self.mesh is None:
+            return
+        b = UsdSkel.BindingAPI(self.mesh)
+        rel = b.GetSkeletonRel()
+        self.mesh_skeleton_targets = [str(t) for t in rel.GetTargets()] if rel else []
+        gb = b.GetGeomBindTransformAttr()
+        if gb and gb.HasAuthoredValue():
+            self.geom_bind = _mat(gb.Get())
+        ip, wp = b.GetJointIndicesPrimvar(), b.GetJointWeightsPrimvar()
+        if not (ip and ip.HasAuthoredValue()) or not (wp and wp.HasAuthoredValue()):
+            self.skin_error = "primvars:skel:jointIndices / jointWeights are missing"
+            return
+        ji = np.array(ip.Get(), dtype=np.int32)
+        jw = np.array(wp.Get(), dtype=np.float32)
+        k = ip.GetElementSize()
+        n = len(self.points) if self.points is not None else 0
+        if wp.GetElementSize() != k:
+            self.skin_error = f"jointIndices elementSize {k} != jointWeights elementSize {wp.GetElementSize()}"
+        elif ip.GetInterpolation() != UsdGeom.Tokens.vertex or wp.GetInterpolation() != UsdGeom.Tokens.vertex:
+            self.skin_error = (f"interpolation must be 'vertex', got {ip.GetInterpolation()!r} / "
+                               f"{wp.GetInterpolation()!r}")
+        elif k < 1 or len(ji) != n * k or len(jw) != n * k:
+            self.skin_error = (f"expected {n} vertices x elementSize {k} = {n * k} entries, got "
+                               f"{len(ji)} indices and {len(jw)} weights")
+        else:
+            self.k = k
+            self.jidx = ji.reshape(n, k)
+            self.jw = jw.reshape(n, k)
+        mj = b.GetJointsAttr()
+        if mj and mj.HasAuthoredValue():
+            self.skin_error = "the mesh authors its own skel:joints order, which this contract does not use"
+            self.jidx = self.jw = None
+
+    def _read_parts(self):
+        self.part_joints = self.part_centers = self.part_radii = None
+        self.part_offsets = self.part_faces = None
+        self.parts_attr_errors = {}
+        if self.mesh is None:
+            return
+        spec = {
+            "colossus:parts:joints": ("part_joints", Sdf.ValueTypeNames.TokenArray),
+            "colossus:parts:centers": ("part_centers", Sdf.ValueTypeNames.Float3Array),
+            "colossus:parts:radii": ("part_radii", Sdf.ValueTypeNames.FloatArray),
+            "colossus:parts:faceOffsets": ("part_offsets", Sdf.ValueTypeNames.IntArray),
+            "colossus:parts:faces": ("part_faces", Sdf.ValueTypeNames.IntArray),
+        }
+        for name, (field, typ) in spec.items():
+            attr = self.mesh.GetAttribute(name)
+            if not attr or not attr.HasAuthoredValue():
+                self.parts_attr_errors[name] = "missing"
+                continue
+            if attr.GetTypeName() != typ:
+                self.parts_attr_errors[name] = f"type {attr.GetTypeName()} (expected {typ})"
+                continue
+            v = attr.Get()
+            if field == "part_joints":
+                setattr(self, field, [str(t) for t in v])
+            elif field == "part_centers":
+                setattr(self, field, np.array(v, dtype=np.float32).reshape(-1, 3))
+            elif field == "part_radii":
+                setattr(self, field, np.array(v, dtype=np.float32))
+            else:
+                setattr(self, field, np.array(v, dtype=np.int64))
+
+    def _read_clips(self):
+        self.clips = []
+        if self.root is None:
+            return
+        for prim in self.root.GetChildren():
+            if not prim.IsA(UsdSkel.Animation):
+                continue
+            anim = UsdSkel.Animation(prim)
+            times = set()
+            for a in CLIP_ATTRS:
+                times.update(prim.GetAttribute(a).GetTimeSamples() if prim.GetAttribute(a) else ())
+            j = anim.GetJointsAttr().Get()
+            self.clips.append(Clip(prim.GetName(), prim, np.array(sorted(times), dtype=np.float64),
+                                   [str(x) for x in j] if j is not None else []))
+
+    # -- derived ---------------------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        return 0 if self.points is None else len(self.points)
+
+    @cached_property
+    def bind_points(self) -> np.ndarray:
+        """(n, 3) float64 points in stage space at bind time: world @ geomBind @ p."""
+        m = self.skel_world @ self.geom_bind
+        return self.points.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+
+    @cached_property
+    def model_size(self) -> float:
+        """Diagonal of the bind-pose bounding box (1.0 when empty or degenerate)."""
+        if self.points is None or len(self.points) == 0:
+            return 1.0
+        p = self.bind_points
+        p = p[np.all(np.isfinite(p), axis=1)]
+        if len(p) == 0:
+            return 1.0
+        d = float(np.linalg.norm(p.max(0) - p.min(0)))
+        return d if d > 0 and np.isfinite(d) else 1.0
+
+    @cached_property
+    def joint_index(self) -> dict:
+        return {j: i for i, j in enumerate(self.joints or [])}
+
+    @cached_property
+    def part_joint_ids(self) -> np.ndarray:
+        """(P,) int32 joint index of each part (-1 for unknown joints)."""
+        return np.array([self.joint_index.get(j, -1) for j in (self.part_joints or [])], dtype=np.int32)
+
+    @cached_property
+    def inv_bind(self) -> np.ndarray:
+        return np.linalg.inv(self.bind)
+
+    @cached_property
+    def part_vertices(self):
+        """CSR ``(offsets (P+1,), vertices)`` of the distinct vertices of each part's faces."""
+        P, n = len(self.part_joints), self.n
+        counts = np.diff(self.part_offsets)
+        pid = np.repeat(np.arange(P, dtype=np.int64), counts)
+        verts = self.tris[self.part_faces].astype(np.int64)  # (sum, 3)
+        key = np.unique(np.repeat(pid, 3) * max(n, 1) + verts.ravel())
+        part_of, vert = key // max(n, 1), key % max(n, 1)
+        offsets = np.searchsorted(part_of, np.arange(P + 1)).astype(np.int64)
+        return offsets, vert.astype(np.int32)
+
+    def anim_local(self, clip: Clip, times) -> np.ndarray:
+        """(f, b, 4, 4) joint-local transforms of ``clip`` at ``times`` in skeleton joint order,
+        evaluated by ``UsdSkel.AnimQuery`` (its interpolation between samples; joints the clip
+        does not animate keep their rest transform)."""
+        q = self._anim_query(clip)
+        b = len(self.joints)
+        src, dst = self._anim_map(clip)
+        out = np.broadcast_to(self.rest, (len(times), b, 4, 4)).copy()
+        for i, t in enumerate(times):
+            m = q.ComputeJointLocalTransforms(Usd.TimeCode(float(t)))
+            if m is None or len(m) != len(clip.joints):
+                raise ValueError(f"clip {clip.name!r}: no joint transforms at time {t}")
+            out[i, dst] = np.array(m, dtype=np.float64)[src].transpose(0, 2, 1)
+        return out
+
+    def _anim_query(self, clip):
+        if not hasattr(self, "_skel_cache"):
+            self._skel_cache = UsdSkel.Cache()
+            self._queries = {}
+        if clip.name not in self._queries:
+            self._queries[clip.name] = self._skel_cache.GetAnimQuery(UsdSkel.Animation(clip.prim))
+        return self._queries[clip.name]
+
+    def _anim_map(self, clip):
+        src = [i for i, j in enumerate(clip.joints) if j in self.joint_index]
+        dst = [self.joint_index[clip.joints[i]] for i in src]
+        return np.array(src, dtype=np.int64), np.array(dst, dtype=np.int64)
+
+    def skel_transforms(self, local: np.ndarray) -> np.ndarray:
+        """Compose ``(f, b, 4, 4)`` joint-local transforms into skeleton space (parents first)."""
+        out = np.empty_like(local)
+        for j in parents_first(self.parents):
+            p = self.parents[j]
+            out[:, j] = local[:, j] if p < 0 else out[:, p] @ local[:, j]
+        return out
+
+    # -- readiness -------------------------------------------------------------------------
+    def ready(self, need: str):
+        """``(ok, reason)``: whether what a rule ``need`` s can be read."""
+        cache = self.__dict__.setdefault("_ready", {})
+        if need not in cache:
+            cache[need] = getattr(self, "_ready_" + need)()
+        return cache[need]
+
+    def _ready_root(self):
+        return (self.root is not None, "no SkelRoot")
+
+    def _ready_skeleton(self):
+        if self.skeleton is None:
+            return False, "no Skeleton under the SkelRoot"
+        b = len(self.joints or [])
+        if b == 0:
+            return False, "the Skeleton has no joints"
+        if self.topology_error:
+            return False, f"joint topology is invalid: {self.topology_error}"
+        if self.bind is None or len(self.bind) != b:
+            return False, "bindTransforms missing or not one per joint"
+        if self.rest is None or len(self.rest) != b:
+            return False, "restTransforms missing or not one per joint"
+        if not (np.all(np.isfinite(self.bind)) and np.all(np.isfinite(self.rest))):
+            return False, "bind or rest transforms are not finite"
+        return True, ""
+
+    def _ready_mesh_raw(self):
+        if self.mesh is None:
+            return False, "no collision Mesh under the SkelRoot"
+        if self.points is None or self.face_counts is None or self.face_indices is None:
+            return False, "the Mesh lacks points, faceVertexCounts or faceVertexIndices"
+        if int(self.face_counts.sum()) != len(self.face_indices) or np.any(self.face_counts < 0):
+            return False, "faceVertexCounts do not add up to the number of faceVertexIndices"
+        return True, ""
+
+    def _ready_mesh(self):
+        ok, why = self.ready("mesh_raw")
+        if not ok:
+            return ok, why
+        if self.tris is None:
+            return False, "the Mesh is not all triangles with in-range vertex indices"
+        return True, ""
+
+    def _ready_skin(self):
+        for need in ("mesh", "skeleton"):
+            ok, why = self.ready(need)
+            if not ok:
+                return ok, why
+        if self.jidx is None:
+            return False, self.skin_error or "no skin influences"
+        return True, ""
+
+    def _ready_skin_ok(self):
+        """Skin usable for skinning: indices in range, finite weights, invertible binds."""
+        ok, why = self.ready("skin")
+        if not ok:
+            return ok, why
+        if self.jidx.size and (self.jidx.min() < 0 or self.jidx.max() >= len(self.joints)):
+            return False, "joint indices out of range"
+        if not np.all(np.isfinite(self.jw)):
+            return False, "joint weights are not finite"
+        if np.any(np.abs(np.linalg.det(self.bind[:, :3, :3])) <= tol.MIN_DETERMINANT):
+            return False, "a bind transform is not invertible"
+        if not np.all(np.isfinite(self.points)):
+            return False, "points are not finite"
+        return True, ""
+
+    def _ready_parts(self):
+        for need in ("mesh", "skeleton"):
+            ok, why = self.ready(need)
+            if not ok:
+                return ok, why
+        if self.parts_attr_errors:
+            return False, "parts attributes: " + ", ".join(f"{k} {v}" for k, v in self.parts_attr_errors.items())
+        P = len(self.part_joints)
+        if len(self.part_centers) != P or len(self.part_radii) != P or len(self.part_offsets) != P + 1:
+            return False, "parts attributes have inconsistent lengths"
+        o = self.part_offsets
+        if o[0] != 0 or o[-1] != len(self.part_faces) or np.any(np.diff(o) < 0):
+            return False, "parts faceOffsets are not non-decreasing from 0 to len(faces)"
+        if len(self.part_faces) and (self.part_faces.min() < 0 or self.part_faces.max() >= len(self.tris)):
+            return False, "parts faces out of range"
+        if np.any(self.part_joint_ids < 0):
+            return False, "a part names a joint the skeleton does not have"
+        return True, ""
+
+    def _ready_spheres(self):
+        ok, why = self.ready("parts")
+        if not ok:
+            return ok, why
+        if not (np.all(np.isfinite(self.part_centers)) and np.all(np.isfinite(self.part_radii))
+                and np.all(self.part_radii > 0)):
+            return False, "a part sphere has a non-finite centre or a non-positive radius"
+        return self.ready("skin_ok")
+
+    def _ready_clips(self):
+        ok, why = self.ready("skeleton")
+        if not ok:
+            return ok, why
+        if not self.clips:
+            return False, "no SkelAnimation clips under the SkelRoot"
+        return True, ""
+
+    def _ready_proof(self):
+        for need in ("spheres", "clips"):
+            ok, why = self.ready(need)
+            if not ok:
+                return ok, why
+        return True, ""
+
+
+def parents_first(parents: np.ndarray) -> list:
+    """Joint indices ordered so every parent precedes its children (stable); cycles dropped."""
+    parents = np.asarray(parents)
+    b = len(parents)
+    depth = np.full(b, -1, dtype=np.int64)
+    for j in range(b):
+        chain, k = [], j
+        while k >= 0 and depth[k] < 0 and len(chain) <= b:
+            chain.append(k)
+            k = parents[k]
+        d = -1 if k < 0 else depth[k]
+        for c in reversed(chain):
+            d += 1
+            depth[c] = d
+    return [int(j) for j in np.argsort(depth, kind="stable")]

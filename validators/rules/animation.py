@@ -1,0 +1,148 @@
+"""COL5xx animation: the SkelAnimation clips."""
+
+from __future__ import annotations
+
+import numpy as np
+from pxr import Usd
+
+from .. import tolerances as tol
+from ..registry import hit, rule
+
+
+@rule("COL501", "clip-has-frames", "error", "Every clip has at least one time sample.", needs=("clips",))
+def clip_has_frames(asset, ctx):
+    """What: each SkelAnimation's translations/rotations/scales have at least one time sample.
+    Why: a clip's frames are exactly its time samples; a clip without any is not a clip.
+    Example: a SkelAnimation with only default values."""
+    for c in asset.clips:
+        if len(c.times) == 0:
+            yield hit(f"clip {c.name!r} has no time samples", clip=c.name, prim=str(c.prim.GetPath()))
+
+
+@rule("COL502", "time-code-rate", "error",
+      "Clip samples sit on whole time codes, one per frame at timeCodesPerSecond, without gaps.", needs=("clips",))
+def time_code_rate(asset, ctx):
+    """What: every time sample of a clip is a whole number and consecutive samples are exactly
+    1 apart (one sample per source frame at the stage's `timeCodesPerSecond`).
+    Why: the runtime maps seconds to frames with `timeCodesPerSecond`; off-grid or missing
+    samples play at the wrong speed or interpolate across a gap nobody checked.
+    Example: samples at 0, 2.5, 5 (a 24 fps clip written on a 60 fps grid)."""
+    for c in asset.clips:
+        t = c.times
+        if len(t) == 0:
+            continue
+        off = np.nonzero(np.abs(t - np.round(t)) > tol.TIME_CODE_EPS)[0]
+        if len(off):
+            i = int(off[0])
+            yield hit(f"clip {c.name!r}: {len(off)} samples are not on whole time codes, first at {t[i]:g}",
+                      clip=c.name, time=float(t[i]), frame=i, count=len(off))
+            continue
+        gaps = np.nonzero(np.abs(np.diff(t) - 1) > tol.TIME_CODE_EPS)[0]
+        if len(gaps):
+            i = int(gaps[0])
+            yield hit(f"clip {c.name!r}: samples {t[i]:g} and {t[i + 1]:g} are not one frame apart "
+                      f"({len(gaps)} irregular steps)", clip=c.name, time=float(t[i]), frame=i, count=len(gaps))
+
+
+@rule("COL503", "finite-animation", "error",
+      "No NaN or infinite translation, rotation or scale, and no zero-length rotation, on any frame.",
+      needs=("clips",))
+def finite_animation(asset, ctx):
+    """What: at every time sample, every joint's translation, rotation (non-zero quaternion) and
+    scale is finite.
+    Why: one NaN joint transform throws its vertices and its part sphere to NaN.
+    Example: a rotation `(nan, 0, 0, 0)` on frame 12 from a degenerate bake."""
+    for c in asset.clips:
+        for a in ("translations", "rotations", "scales"):
+            attr = c.prim.GetAttribute(a)
+            if not attr:
+                continue
+            for i, t in enumerate(attr.GetTimeSamples()):
+                v = attr.Get(Usd.TimeCode(t))
+                if v is None:
+                    continue
+                arr = np.array(v, dtype=np.float64)  # quaternions come as (x, y, z, w): fine here
+                bad = ~np.all(np.isfinite(arr.reshape(len(arr), -1)), axis=1) if arr.size else np.zeros(0, bool)
+                if a == "rotations" and arr.size:
+                    bad |= np.linalg.norm(arr, axis=1) < 1e-12
+                if np.any(bad):
+                    j = int(np.argmax(bad))
+                    frame = int(np.searchsorted(c.times, t))
+                    joint = c.joints[j] if j < len(c.joints) else None
+                    yield hit(f"clip {c.name!r} time {t:g}: {a} of joint {joint!r} is not finite (or a zero rotation)",
+                              clip=c.name, time=float(t), frame=frame, joint=joint)
+                    break
+
+
+@rule("COL504", "unique-clip-names", "error", "Clip names are unique.", needs=("root",))
+def unique_clip_names(asset, ctx):
+    """What: no two SkelAnimation prims on the stage share a name.
+    Why: clips are looked up by name at run time.
+    Example: `/Boss/walk` and `/Boss/Skeleton/walk`."""
+    names = {}
+    for p in asset.animations:
+        names.setdefault(p.GetName(), []).append(str(p.GetPath()))
+    for name, paths in names.items():
+        if len(paths) > 1:
+            yield hit(f"clip name {name!r} is used by {len(paths)} SkelAnimation prims: {', '.join(paths)}",
+                      clip=name, count=len(paths))
+
+
+@rule("COL505", "clip-joints", "error", "Each clip animates the skeleton's joints, in the skeleton's order.",
+      needs=("clips",))
+def clip_joints(asset, ctx):
+    """What: each clip's `joints` equals the Skeleton's `joints`, element for element.
+    Why: the contract writes clips in skeleton order so consumers need no remapping; a
+    missing joint silently stays at rest.
+    Example: a clip listing `root/mid` before `root`."""
+    for c in asset.clips:
+        if c.joints != asset.joints:
+            extra = [j for j in c.joints if j not in asset.joint_index]
+            missing = [j for j in asset.joints if j not in c.joints]
+            detail = (f"unknown {extra[:3]}" if extra else "") + (f" missing {missing[:3]}" if missing else "")
+            yield hit(f"clip {c.name!r}: joints differ from the skeleton's ({detail.strip() or 'different order'})",
+                      clip=c.name)
+        for a in ("translations", "rotations", "scales"):
+            attr = c.prim.GetAttribute(a)
+            ts = attr.GetTimeSamples() if attr else []
+            if ts:
+                v = attr.Get(Usd.TimeCode(ts[0]))
+                if v is not None and len(v) != len(c.joints):
+                    yield hit(f"clip {c.name!r}: {a} has {len(v)} entries for {len(c.joints)} joints",
+                              clip=c.name, time=float(ts[0]))
+
+
+@rule("COL506", "has-clips", "warning", "The SkelRoot holds at least one clip.", needs=("root",))
+def has_clips(asset, ctx):
+    """What: at least one SkelAnimation prim is a direct child of the SkelRoot.
+    Why: a collider without animation cannot be proven on any frame; only the bind pose is checked.
+    Example: an export with "bake animation" switched off."""
+    if not asset.clips:
+        yield hit(f"no SkelAnimation clips under {asset.root.GetPath()}: only the bind pose was checked")
+
+
+@rule("COL507", "clip-location", "warning", "Every SkelAnimation is a direct child of the SkelRoot.",
+      needs=("root",))
+def clip_location(asset, ctx):
+    """What: SkelAnimation prims sit directly under the SkelRoot, where the runtime looks for clips.
+    Why: a clip elsewhere is not checked by the frame proof and not played by the runtime.
+    Example: `/Boss/Skeleton/walk`."""
+    clip_paths = {str(c.prim.GetPath()) for c in asset.clips}
+    for p in asset.animations:
+        if str(p.GetPath()) not in clip_paths:
+            yield hit(f"SkelAnimation {p.GetPath()} is not a direct child of {asset.root.GetPath()} "
+                      f"(not checked, not played)", prim=str(p.GetPath()), clip=p.GetName())
+
+
+@rule("COL508", "animation-source", "warning",
+      "The Skeleton's skel:animationSource targets the first clip.", needs=("clips",))
+def animation_source(asset, ctx):
+    """What: the Skeleton has `UsdSkelBindingAPI` with `skel:animationSource` targeting the first
+    clip under the SkelRoot.
+    Why: usdview and `UsdSkel.BakeSkinning` show the bound clip; the contract binds the first.
+    Example: no animationSource, so other tools show the rest pose."""
+    rel = asset.skeleton.GetRelationship("skel:animationSource")
+    targets = [str(t) for t in rel.GetTargets()] if rel else []
+    want = str(asset.clips[0].prim.GetPath())
+    if targets != [want]:
+        yield hit(f"skel:animationSource targets {targets}, expected [{want}]", prim=str(asset.skeleton.GetPath()))

@@ -1,0 +1,266 @@
+"""Running the rules: one asset (:func:`check_asset`) or many paths (:func:`check_paths`)."""
+
+from __future__ import annotations
+
+import os
+import time
+import traceback
+from pathlib import Path
+
+from pxr import Usd
+
+from . import tolerances as tol
+from .asset import LoadedAsset, open_stage
+from .findings import SEVERITIES, AssetReport, Finding
+from .registry import RuleSelector, get_rule
+
+USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
+
+DEFAULT_OPTIONS = {
+    "max_influences": tol.MAX_INFLUENCES,
+    "subframes": 0,
+    "slack_ratio": tol.SLACK_RATIO,
+    "chunk_frames": None,
+}
+
+
+class Context:
+    """Options shared by the rules of one asset, and the cached frame proof.
+
+    Attributes: ``max_influences`` (int), ``subframes`` (int), ``slack_ratio`` (float),
+    ``chunk_frames`` (int or None: automatic).
+    """
+
+    def __init__(self, asset, **options):
+        unknown = set(options) - set(DEFAULT_OPTIONS)
+        if unknown:
+            raise TypeError(f"unknown option(s): {', '.join(sorted(unknown))}")
+        opts = {**DEFAULT_OPTIONS, **options}
+        if int(opts["subframes"]) < 0:
+            raise ValueError(f"subframes: expected >= 0, got {opts['subframes']}")
+        if int(opts["max_influences"]) < 1:
+            raise ValueError(f"max_influences: expected >= 1, got {opts['max_influences']}")
+        self.asset = asset
+        self.max_influences = int(opts["max_influences"])
+        self.subframes = int(opts["subframes"])
+        self.slack_ratio = float(opts["slack_ratio"])
+        self.chunk_frames = opts["chunk_frames"]
+        self._proof = None
+
+    def proof(self):
+        if self._proof is None:
+            from .frameproof import prove
+            self._proof = prove(self.asset, subframes=self.subframes, chunk_frames=self.chunk_frames)
+        return self._proof
+
+
+def _finding(code, message, severities=None, **location):
+    r = get_rule(code)
+    sev = (severities or {}).get(code, r.severity)
+    return Finding(code, sev, message, r.name, location)
+
+
+def _check_severities(severities):
+    for code, sev in (severities or {}).items():
+        if sev not in SEVERITIES:
+            raise ValueError(f"severity for {code}: expected one of {SEVERITIES}, got {sev!r}")
+        get_rule(code)
+
+
+def check_asset(path_or_stage, select=None, ignore=None, severities=None, **options) -> AssetReport:
+    """Run every selected rule on one asset; never raises for a bad asset.
+
+    Parameters
+    ----------
+    path_or_stage : str, os.PathLike or pxr.Usd.Stage
+    select, ignore : list of str, optional
+        Codes or prefixes (``"COL4"``, ``"COL403"``); the longest matching prefix wins, ignore
+        on a tie.  Default: everything.
+    severities : dict, optional
+        ``code -> "error" | "warning" | "info"`` overrides.
+    **options
+        ``max_influences`` (4), ``subframes`` (0), ``slack_ratio`` (1.5), ``chunk_frames`` (auto).
+
+    Returns
+    -------
+    AssetReport
+        ``.passed`` is False when any finding has severity error.
+    """
+    selector = RuleSelector(select, ignore)
+    _check_severities(severities)
+    Context(None, **options)  # validate options before touching the asset
+    t0 = time.perf_counter()
+    if isinstance(path_or_stage, Usd.Stage):
+        path = path_or_stage.GetRootLayer().identifier
+        stage = path_or_stage
+    else:
+        path = os.fspath(path_or_stage)
+        stage = None
+    report = AssetReport(path)
+
+    def add(code, message, **loc):
+        if selector.enabled(code):
+            report.findings.append(_finding(code, message, severities, **loc))
+
+    if stage is None:
+        if not os.path.isfile(path) or not os.access(path, os.R_OK):
+            add("COL003", f"{path} does not exist or is not a readable file")
+            report.sort()
+            return report
+        try:
+            stage = open_stage(path)
+        except Exception as e:  # usd-core raises Tf.ErrorException and friends
+            add("COL001", f"usd-core cannot open the asset: {_one_line(e)}")
+            report.sort()
+            return report
+    try:
+        asset = LoadedAsset(stage, path)
+    except Exception as e:
+        add("COL001", f"the asset could not be read: {_one_line(e)}")
+        report.sort()
+        return report
+    ctx = Context(asset, **options)
+    t_load = time.perf_counter() - t0
+    for rule in selector.rules():
+        if rule.func is None:
+            continue
+        blocked = next((asset.ready(n)[1] for n in rule.needs if not asset.ready(n)[0]), None)
+        if blocked is not None:
+            report.skipped[rule.code] = blocked
+            continue
+        report.rules_run.append(rule.code)
+        try:
+            for h in rule.func(asset, ctx):
+                sev = (severities or {}).get(rule.code, rule.severity)
+                report.findings.append(Finding(rule.code, sev, h["message"], rule.name,
+                                               {k: v for k, v in h["location"].items() if v is not None},
+                                               h["sort_key"]))
+        except Exception as e:
+            tb = traceback.extract_tb(e.__traceback__)[-1]
+            add("COL002", f"rule {rule.code} ({rule.name}) crashed: {type(e).__name__}: {_one_line(e)} "
+                          f"[{Path(tb.filename).name}:{tb.lineno}]", validator=rule.code)
+    report.stats = _stats(asset, ctx, t_load, time.perf_counter() - t0)
+    report.sort()
+    return report
+
+
+def _one_line(e) -> str:
+    s = " ".join(str(e).split())
+    return s[:300] or type(e).__name__
+
+
+def _stats(asset, ctx, t_load, t_total) -> dict:
+    s = {
+        "vertices": asset.n,
+        "faces": 0 if asset.face_counts is None else len(asset.face_counts),
+        "joints": len(asset.joints or []),
+        "parts": len(asset.part_joints or []),
+        "clips": {c.name: len(c.times) for c in asset.clips},
+        "load_seconds": round(t_load, 4),
+        "seconds": round(t_total, 4),
+    }
+    if ctx._proof is not None:
+        s["frameproof"] = ctx._proof.stats()
+    else:
+        ok, why = asset.ready("proof")
+        s["frameproof"] = {"checked": [], "not_checked": [
+            "the frame proof did not run: " + (why if not ok else "COL403/COL404 not selected")]}
+    return s
+
+
+# ------------------------------------------------------------------------------ many paths
+def discover(paths):
+    """Expand paths: directories recurse for ``*.usd, *.usda, *.usdc, *.usdz`` (sorted); files
+    are taken as given.  Returns ``(assets, missing)``."""
+    assets, missing = [], []
+    for p in paths:
+        p = os.fspath(p)
+        if os.path.isdir(p):
+            found = []
+            for root, dirs, files in os.walk(p):
+                dirs.sort()
+                found += [os.path.join(root, f) for f in files if f.lower().endswith(USD_SUFFIXES)]
+            assets += sorted(found)
+        elif os.path.exists(p):
+            assets.append(p)
+        else:
+            missing.append(p)
+    return assets, missing
+
+
+def _worker(args):
+    path, kw = args
+    return check_asset(path, **kw)
+
+
+def check_paths(paths, jobs=1, progress=None, **kw):
+    """Check every asset under ``paths`` (see :func:`discover`), in ``jobs`` processes.
+
+    ``progress``: optional callable ``(done, total, path)``.  A worker process that dies on an
+    asset (a crash inside usd-core) yields a ``COL001`` report for that asset; the others go on.
+    Returns ``(reports, missing)`` with reports in input order, missing paths included as
+    ``COL003`` reports.
+    """
+    assets, missing = discover(paths)
+    order = list(assets) + list(missing)
+    reports = {}
+    total = len(order)
+    done = 0
+    for m in missing:
+        reports[m] = check_asset(m, **kw)
+    if jobs <= 1 or len(assets) <= 1:
+        for a in assets:
+            reports[a] = check_asset(a, **kw)
+            done += 1
+            if progress:
+                progress(done, len(assets), a)
+    else:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+        from concurrent.futures.process import BrokenProcessPool
+        pending = list(assets)
+        while pending:
+            with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as ex:
+                futs = {ex.submit(_worker, (a, kw)): a for a in pending}
+                broken = []
+                for fut in as_completed(futs):
+                    a = futs[fut]
+                    try:
+                        reports[a] = fut.result()
+                    except BrokenProcessPool:
+                        broken.append(a)
+                        continue
+                    except Exception as e:  # pragma: no cover - check_asset does not raise
+                        reports[a] = _crash_report(a, e, kw)
+                    done += 1
+                    if progress:
+                        progress(done, len(assets), a)
+            if broken and len(broken) == len(pending):
+                # Isolate: run the survivors one at a time so one crashing asset cannot take others down.
+                for a in broken:
+                    reports[a] = _isolated(a, kw)
+                    done += 1
+                    if progress:
+                        progress(done, len(assets), a)
+                broken = []
+            pending = broken
+    return [reports[p] for p in order], missing
+
+
+def _crash_report(path, e, kw):
+    rep = AssetReport(path)
+    rep.findings.append(_finding("COL001", f"checking the asset crashed: {_one_line(e)}", kw.get("severities")))
+    return rep
+
+
+def _isolated(path, kw):
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+    with ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn")) as ex:
+        try:
+            return ex.submit(_worker, (path, kw)).result()
+        except BrokenProcessPool:
+            return _crash_report(path, RuntimeError("the checker process died (usd-core crashed on this file)"), kw)
+        except Exception as e:  # pragma: no cover
+            return _crash_report(path, e, kw)

@@ -1,0 +1,34 @@
+"""Every tolerance and default of the validators in one place (after trimesh's ``ToleranceMesh``).
+
+Lengths named ``*_RELATIVE`` are fractions of the model size: the diagonal of the bind-pose
+bounding box of the collider's points, in stage units.
+"""
+
+#: Influence weights of a vertex must sum to 1 within this (absolute).
+WEIGHT_SUM = 1e-4
+#: Weights below ``-WEIGHT_NEGATIVE`` count as negative (float noise is tolerated).
+WEIGHT_NEGATIVE = 1e-7
+#: Default maximum number of influences per vertex (``--max-influences``).
+MAX_INFLUENCES = 4
+#: Two distinct vertices closer than this are unwelded duplicates.
+WELD_RELATIVE = 1e-6
+#: A triangle whose area is below (this x model size)^2 is zero-area.
+ZERO_AREA_RELATIVE = 1e-7
+#: A vertex lies inside its sphere when its distance to the centre exceeds the radius by at most
+#: ``CONTAIN_RELATIVE x model size + CONTAIN_RADIUS x radius`` (float32 skinning noise).
+CONTAIN_RELATIVE = 1e-6
+CONTAIN_RADIUS = 1e-5
+#: A sphere is slack when its radius exceeds the tightest radius that holds on all frames by
+#: more than this ratio (``slack_ratio`` option).
+SLACK_RATIO = 1.5
+#: Bind transforms agree with the composed rest transforms when every entry differs by at most
+#: this times (1 + the entry's magnitude), translations scaled by the model size.
+BIND_REST_RELATIVE = 1e-4
+#: A bind transform is invertible when |det| of its 3x3 part exceeds this.
+MIN_DETERMINANT = 1e-12
+#: Time codes are integers within this.
+TIME_CODE_EPS = 1e-6
+#: Frame-proof chunking: at most this many bytes of per-frame joint matrices at once.
+CHUNK_BYTES = 32 * 1024 * 1024
+#: ... and at most this many frames per chunk.
+CHUNK_FRAMES = 256
