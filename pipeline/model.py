@@ -230,23 +230,30 @@ def skel_transforms(local: np.ndarray, parents: np.ndarray) -> np.ndarray:
 
 
 def parents_first_order(parents: np.ndarray) -> np.ndarray:
-    """Indices of joints ordered so every parent comes before its children (stable)."""
+    """Indices of joints ordered so every parent comes before its children.
+
+    Keeps the given order when it is already parents-first; otherwise each joint is placed
+    right after its not-yet-placed ancestors, in the original order otherwise.
+    Raises ``ValueError`` on a cycle.
+    """
     parents = np.asarray(parents)
     b = len(parents)
-    depth = np.full(b, -1, dtype=np.int64)
+    if b == 0 or np.all(parents < np.arange(b)):
+        return np.arange(b)
+    placed = np.zeros(b, dtype=bool)
+    order = []
     for j in range(b):
         chain = []
         k = j
-        while k >= 0 and depth[k] < 0:
+        while k >= 0 and not placed[k]:
+            if k in chain:
+                raise ValueError("joint hierarchy has a cycle")
             chain.append(k)
             k = parents[k]
-            if len(chain) > b:
-                raise ValueError("joint hierarchy has a cycle")
-        d = -1 if k < 0 else depth[k]
         for c in reversed(chain):
-            d += 1
-            depth[c] = d
-    return np.argsort(depth, kind="stable")
+            placed[c] = True
+            order.append(c)
+    return np.array(order, dtype=np.int64)
 
 
 def skin_points(mesh: SkinnedMesh, skel: np.ndarray) -> np.ndarray:

@@ -1,0 +1,252 @@
+"""``weld``: merge vertices that share a position *and* the same skin influences.
+
+After trimesh's ``grouping.merge_vertices``: :func:`weld_maps` returns ``(keep, inverse)`` index
+maps that every per-vertex attribute goes through.  The weld key includes the skin influences:
+two vertices at one position with different weights are genuinely different vertices (welding
+them would change the animated shape), so they are kept apart and reported, since such a seam
+tears open in animation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+from numba import njit
+
+from pipeline.model import SkinnedMesh, Parts
+from pipeline.stages import StageReport
+from pipeline.tolerances import WELD_RELATIVE, WELD_WEIGHT, model_scale
+
+
+@njit(cache=True)
+def _canonical(j, w, cj, cw):
+    """Per row: influences with weight > 0 sorted by (joint, weight), then (-1, 0) padding."""
+    n, k = j.shape
+    for v in range(n):
+        c = 0
+        for t in range(k):
+            wt = w[v, t]
+            if wt > 0:  # insertion sort of the live influences
+                jt = np.int64(j[v, t])
+                s = c
+                while s > 0 and (cj[v, s - 1] > jt or (cj[v, s - 1] == jt and cw[v, s - 1] > wt)):
+                    cj[v, s] = cj[v, s - 1]
+                    cw[v, s] = cw[v, s - 1]
+                    s -= 1
+                cj[v, s] = jt
+                cw[v, s] = wt
+                c += 1
+        for t in range(c, k):
+            cj[v, t] = -1
+            cw[v, t] = 0
+
+
+def canonical_influences(joint_indices: np.ndarray, joint_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Influences in a column-order independent form.
+
+    Parameters
+    ----------
+    joint_indices : (n, k) int
+    joint_weights : (n, k) float
+
+    Returns
+    -------
+    joints : (n, k) int64
+        Influences with weight > 0 sorted by joint index (then weight), then ``-1`` padding.
+    weights : (n, k) float32
+        Matching weights, ``0`` padding.
+    """
+    j = np.ascontiguousarray(joint_indices, dtype=np.int64)
+    w = np.ascontiguousarray(joint_weights, dtype=np.float32)
+    cj = np.empty(j.shape, np.int64)
+    cw = np.empty(w.shape, np.float32)
+    _canonical(j, w, cj, cw)
+    return cj, cw
+
+
+@njit(cache=True)
+def _exact_groups(rows):
+    """Label each row of ``rows`` (n, c) uint32 with the index of the first identical row
+    (open-addressing hash table; expected O(n))."""
+    n, c = rows.shape
+    size = 1
+    while size < 2 * n:
+        size *= 2
+    mask = np.uint64(size - 1)
+    table = np.full(size, -1, np.int64)
+    label = np.empty(n, np.int64)
+    for i in range(n):
+        h = np.uint64(1469598103934665603)
+        for t in range(c):  # FNV-1a over 32-bit words, then a splitmix finaliser
+            h = (h ^ np.uint64(rows[i, t])) * np.uint64(1099511628211)
+        h ^= h >> np.uint64(31)
+        h *= np.uint64(0xBF58476D1CE4E5B9)
+        h ^= h >> np.uint64(29)
+        slot = h & mask
+        while True:
+            r = table[slot]
+            if r < 0:
+                table[slot] = i
+                label[i] = i
+                break
+            same = True
+            for t in range(c):
+                if rows[r, t] != rows[i, t]:
+                    same = False
+                    break
+            if same:
+                label[i] = r
+                break
+            slot = (slot + np.uint64(1)) & mask
+    return label
+
+
+def _row_groups(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Group identical rows of a 2-D uint32 array: ``(first index of each group (increasing),
+    group of each row)``."""
+    label = _exact_groups(np.ascontiguousarray(rows, dtype=np.uint32))
+    is_first = label == np.arange(len(label))
+    first = np.flatnonzero(is_first)
+    group = (np.cumsum(is_first) - 1)[label]
+    return first, group
+
+
+def weld_maps(positions: np.ndarray, joint_indices: np.ndarray, joint_weights: np.ndarray,
+              tolerance: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """Index maps that merge vertices closer than ``tolerance`` with the same skin influences.
+
+    Two vertices are merged when they are within ``tolerance`` (Euclidean) of each other and
+    carry the same influences: the same set of joints with weight > 0 (in any column order),
+    each weight equal within :data:`~pipeline.tolerances.WELD_WEIGHT`.  Merging is transitive
+    (connected components of that relation, like trimesh).  O(n log n): exact duplicates are
+    grouped by sorting, the rest found with a k-d tree.
+
+    Parameters
+    ----------
+    positions : (n, 3) float
+    joint_indices : (n, k) int
+    joint_weights : (n, k) float
+    tolerance : float, >= 0
+
+    Returns
+    -------
+    keep : (u,) int64
+        Index of the vertex kept for each output vertex: the lowest original index of its group;
+        increasing, so kept vertices stay in their original relative order.
+    inverse : (n,) int64
+        Output vertex of each input vertex: ``positions[keep][inverse]`` is each vertex's
+        representative.
+    conflicts : int
+        Number of **output** vertices lying within ``tolerance`` of another output vertex whose
+        influences differ (a seam kept open because the skin weights disagree).
+    """
+    p = np.asarray(positions)
+    n = len(p)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ValueError(f"weld positions: expected shape (n, 3), got {p.shape}")
+    ji = np.asarray(joint_indices)
+    jw = np.asarray(joint_weights)
+    if ji.ndim != 2 or ji.shape[0] != n:
+        raise ValueError(f"weld joint_indices: expected shape ({n}, k), got {ji.shape}")
+    if jw.shape != ji.shape:
+        raise ValueError(f"weld joint_weights: expected shape {ji.shape}, got {jw.shape}")
+    tolerance = float(tolerance)
+    if not np.isfinite(tolerance) or tolerance < 0:
+        raise ValueError(f"weld tolerance: expected a finite number >= 0, got {tolerance}")
+    if n == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), 0
+
+    cj, cw = canonical_influences(ji, jw)
+    # 1. exact duplicates (position bits + canonical influences): "classes"
+    pos32 = np.ascontiguousarray(p, dtype=np.float32) + np.float32(0.0)  # -0.0 -> +0.0
+    rows = np.concatenate([pos32.view(np.uint32), cj.astype(np.int32).view(np.uint32),
+                           cw.view(np.uint32)], axis=1)
+    cls_first, cls_of = _row_groups(rows)
+    nc = len(cls_first)
+
+    # 2. near classes (k-d tree on class representatives), split by influence equality
+    tree = cKDTree(pos32[cls_first].astype(np.float64))
+    pairs = tree.query_pairs(r=tolerance, output_type="ndarray")
+    a, b = cls_first[pairs[:, 0]], cls_first[pairs[:, 1]]
+    same = np.all(cj[a] == cj[b], axis=1) & np.all(np.abs(cw[a] - cw[b]) <= WELD_WEIGHT, axis=1)
+    good = pairs[same]
+    graph = coo_matrix((np.ones(len(good), np.int8), (good[:, 0], good[:, 1])), shape=(nc, nc))
+    ncomp, comp_of_cls = connected_components(graph, directed=False)
+    comp = comp_of_cls[cls_of]
+
+    # 3. lowest original index per group, groups in original order (classes are numbered in
+    #    order of their first vertex, so a group's first class holds its lowest vertex)
+    first = np.full(ncomp, nc, dtype=np.int64)
+    np.minimum.at(first, comp_of_cls, np.arange(nc, dtype=np.int64))
+    order = np.argsort(first, kind="stable")
+    keep = cls_first[first[order]]
+    rank = np.empty(ncomp, np.int64)
+    rank[order] = np.arange(ncomp)
+    inverse = rank[comp]
+
+    bad = pairs[~same]
+    ra, rb = rank[comp_of_cls[bad[:, 0]]], rank[comp_of_cls[bad[:, 1]]]
+    apart = ra != rb
+    conflicts = int(len(np.unique(np.concatenate([ra[apart], rb[apart]]))))
+    return keep, inverse, conflicts
+
+
+def weld(mesh: SkinnedMesh, tolerance: float | None = None) -> tuple[SkinnedMesh, StageReport]:
+    """Merge coincident vertices with equal skin influences; drop faces that collapse.
+
+    Parameters
+    ----------
+    mesh : SkinnedMesh
+    tolerance : float, optional
+        Absolute weld distance in mesh units; default
+        :data:`~pipeline.tolerances.WELD_RELATIVE` times the model size.
+
+    Returns
+    -------
+    (SkinnedMesh, StageReport)
+        Report counts: ``vertices_in``, ``vertices_out``, ``merged``, ``weight_conflicts``,
+        ``degenerate_faces_removed``, ``faces_out``, ``tolerance``.
+    """
+    if tolerance is None:
+        tolerance = WELD_RELATIVE * model_scale(mesh.positions)
+    keep, inverse, conflicts = weld_maps(mesh.positions, mesh.joint_indices, mesh.joint_weights, tolerance)
+    tris = inverse[mesh.triangles]
+    degenerate = (tris[:, 0] == tris[:, 1]) | (tris[:, 1] == tris[:, 2]) | (tris[:, 0] == tris[:, 2])
+    kept_faces = ~degenerate
+    changes = dict(
+        positions=mesh.positions[keep],
+        triangles=tris[kept_faces].astype(np.int32),
+        joint_indices=mesh.joint_indices[keep],
+        joint_weights=mesh.joint_weights[keep],
+    )
+    if mesh.parts is not None:
+        changes["parts"] = _drop_faces(mesh.parts, kept_faces)
+    out = mesh.replace(**changes)
+
+    report = StageReport("weld")
+    report.counts = {
+        "vertices_in": int(mesh.vertex_count),
+        "vertices_out": int(len(keep)),
+        "merged": int(mesh.vertex_count - len(keep)),
+        "weight_conflicts": int(conflicts),
+        "degenerate_faces_removed": int(degenerate.sum()),
+        "faces_out": int(kept_faces.sum()),
+        "tolerance": float(tolerance),
+    }
+    if conflicts:
+        report.warnings.append(
+            f"{conflicts} same-position vertices have different skin weights and were kept apart "
+            "(they would tear open in animation)")
+    return out, report
+
+
+def _drop_faces(parts: Parts, kept_faces: np.ndarray) -> Parts:
+    """Parts with removed faces dropped and the remaining faces renumbered."""
+    new_index = np.cumsum(kept_faces) - 1
+    part_of = np.repeat(np.arange(len(parts)), np.diff(parts.face_offsets))
+    alive = kept_faces[parts.faces]
+    counts = np.bincount(part_of[alive], minlength=len(parts))
+    return Parts(parts.joints, np.concatenate([[0], np.cumsum(counts)]), new_index[parts.faces[alive]],
+                 parts.centers, parts.radii)

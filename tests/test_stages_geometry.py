@@ -1,0 +1,361 @@
+"""weld, orient, parts, spheres and the minimal-sphere kernel, on synthetic meshes."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+import naive
+import synth
+from pipeline.geometry import min_sphere, min_spheres
+from pipeline.model import skel_transforms, skin_points as skin_points_ref
+from pipeline.stages.orient import orient
+from pipeline.stages.parts import parts
+from pipeline.stages.spheres import pose_transforms, skin_points, spheres
+from pipeline.stages.weld import weld, weld_maps
+from pipeline.tolerances import WELD_WEIGHT
+
+
+def snapshot(mesh):
+    """Deep copies of every array of a mesh, to check a stage did not mutate its input."""
+    return copy.deepcopy(mesh.__dict__)
+
+
+def assert_unchanged(mesh, snap):
+    for k, v in snap.items():
+        now = getattr(mesh, k)
+        if isinstance(v, np.ndarray):
+            np.testing.assert_array_equal(now, v, err_msg=k)
+        elif k == "parts" and v is not None:
+            for a in ("joints", "face_offsets", "faces", "centers", "radii"):
+                np.testing.assert_array_equal(getattr(now, a), getattr(v, a))
+        elif k == "clips":
+            for c0, c1 in zip(now, v):
+                np.testing.assert_array_equal(c0.local, c1.local)
+
+
+def same_faces(pa, ta, pb, tb):
+    """Both meshes have the same triangles (as corner positions, up to rotation of corners)."""
+    def canon(p, t):
+        c = p[t]  # (m, 3, 3)
+        rows = []
+        for tri in c:
+            rots = [tuple(np.roll(tri, -r, axis=0).ravel()) for r in range(3)]
+            rows.append(min(rots))
+        return sorted(rows)
+    return canon(pa, ta) == canon(pb, tb)
+
+
+def rot_canon(t):
+    """Triangles with each row rotated so its smallest index comes first (winding kept)."""
+    t = np.asarray(t)
+    k = np.argmin(t, axis=1)
+    idx = (k[:, None] + np.arange(3)[None]) % 3
+    return np.take_along_axis(t, idx, axis=1)
+
+
+# -- weld ------------------------------------------------------------------------------------
+
+def test_weld_split_corners_restores_vertex_count():
+    mesh = synth.make_tube(around=12, rings=6)
+    split = synth.split_corners(mesh, permute_columns=True)
+    snap = snapshot(split)
+    out, rep = weld(split)
+    assert_unchanged(split, snap)
+    assert out.vertex_count == mesh.vertex_count
+    assert rep.counts["vertices_out"] == mesh.vertex_count
+    assert rep.counts["merged"] == split.vertex_count - mesh.vertex_count
+    assert rep.counts["weight_conflicts"] == 0 and rep.warnings == []
+    assert rep.counts["degenerate_faces_removed"] == 0
+    assert same_faces(out.positions, out.triangles, mesh.positions, mesh.triangles)
+    # kept vertices in original order, representatives reconstruct every vertex
+    keep, inverse, _ = weld_maps(split.positions, split.joint_indices, split.joint_weights, 1e-6)
+    assert np.all(np.diff(keep) > 0)
+    np.testing.assert_array_equal(split.positions[keep][inverse], split.positions)
+    assert naive.inconsistent_edges(out.triangles) == 0
+
+
+def test_weld_weight_conflicts_kept_apart():
+    mesh = synth.make_tube(around=8, rings=4)
+    split = synth.split_corners(mesh)
+    jw = split.joint_weights.copy()
+    target = split.triangles[0, 0]
+    at = np.flatnonzero(np.all(split.positions == split.positions[target], axis=1))
+    assert len(at) >= 4
+    jw[at[:2], :3] = [0.2, 0.3, 0.5]  # two copies of one position get other weights
+    out, rep = weld(split.replace(joint_weights=jw))
+    assert rep.counts["weight_conflicts"] == 2  # the two output vertices at that position
+    assert rep.counts["vertices_out"] == mesh.vertex_count + 1
+    assert "2 same-position vertices have different skin weights" in rep.warnings[0]
+
+
+def test_weld_maps_matches_naive():
+    rng = np.random.default_rng(3)
+    for trial in range(20):
+        n = 60
+        base = rng.random((12, 3)).astype(np.float32)
+        pos = base[rng.integers(0, 12, n)] + (rng.random((n, 3)) < 0.1) * np.float32(3e-4)
+        ji = rng.integers(0, 3, (n, 3)).astype(np.int32)
+        jw = rng.choice([0.0, 0.25, 0.5], (n, 3)).astype(np.float32)
+        jw[rng.random(n) < 0.5] = [0.5, 0.25, 0.25]
+        ji[rng.random(n) < 0.5] = [0, 1, 2]
+        jw += (rng.random((n, 3)) < 0.05) * np.float32(WELD_WEIGHT / 2) * (jw > 0)
+        perm = np.argsort(rng.random((n, 3)), axis=1)
+        ji, jw = np.take_along_axis(ji, perm, 1), np.take_along_axis(jw, perm, 1)
+        tol = 1e-3 if trial % 2 else 0.0
+        k, inv, c = weld_maps(pos.astype(np.float32), ji, jw, tol)
+        nk, ninv, nc = naive.weld_maps(pos.astype(np.float32), ji, jw, tol, WELD_WEIGHT)
+        np.testing.assert_array_equal(k, nk)
+        np.testing.assert_array_equal(inv, ninv)
+        assert c == nc
+
+
+def test_weld_removes_degenerate_faces():
+    pos, tris = synth.icosphere(1)
+    mesh = synth.rigid_mesh(pos, tris)
+    p = mesh.positions.copy()
+    a, b = tris[0, 0], tris[0, 1]
+    p[b] = p[a] + 1e-8  # collapse one edge: its two faces become degenerate
+    out, rep = weld(mesh.replace(positions=p))
+    assert rep.counts["degenerate_faces_removed"] == 2
+    assert out.face_count == mesh.face_count - 2
+    assert rep.counts["merged"] == 1
+    empty = weld_maps(np.zeros((0, 3), np.float32), np.zeros((0, 1)), np.zeros((0, 1)), 0.1)
+    assert [len(x) for x in empty[:2]] == [0, 0] and empty[2] == 0
+
+
+# -- orient ------------------------------------------------------------------------------------
+
+def test_orient_fixes_random_flips_closed():
+    pos, tris = synth.icosphere(3)
+    rng = np.random.default_rng(0)
+    flip = rng.random(len(tris)) < 0.3
+    bad = tris.copy()
+    bad[flip] = bad[flip][:, ::-1]
+    mesh = synth.rigid_mesh(pos, bad)
+    snap = snapshot(mesh)
+    out, rep = orient(mesh)
+    assert_unchanged(mesh, snap)
+    assert rep.counts["faces_flipped"] == flip.sum()
+    assert rep.counts["shells"] == 1 and rep.counts["closed_shells"] == 1
+    assert rep.counts["inconsistent_edges_remaining"] == 0
+    assert naive.inconsistent_edges(out.triangles) == 0
+    assert naive.signed_volume(out.positions, out.triangles) > 0
+    np.testing.assert_array_equal(rot_canon(out.triangles), rot_canon(tris))
+
+
+def test_orient_inside_out_and_concentric_shells_and_fin():
+    po, to = synth.icosphere(2, radius=2.0)
+    pi, ti = synth.icosphere(1, radius=1.0)
+    pos = np.concatenate([po, pi])
+    inner = ti[:, ::-1] + len(po)  # inside-out inner shell
+    outer = to.copy()
+    outer[:7] = outer[:7, ::-1]  # a few flipped faces on the outer shell
+    # a non-manifold fin on an outer edge
+    a, b = to[10, 0], to[10, 1]
+    fin_tip = len(pos)
+    pos = np.concatenate([pos, [po[a] * 1.5]])
+    tris = np.concatenate([outer, inner, [[a, b, fin_tip]]])
+    mesh = synth.rigid_mesh(pos, tris)
+    out, rep = orient(mesh)
+    assert rep.counts["nonmanifold_edges"] == 1
+    assert any("non-manifold" in w for w in rep.warnings)
+    assert rep.counts["shells"] == 3 and rep.counts["closed_shells"] == 2 and rep.counts["open_shells"] == 1
+    assert rep.counts["faces_flipped"] == 7 + len(ti)
+    assert naive.signed_volume(out.positions, out.triangles[:len(to)]) > 0
+    assert naive.signed_volume(out.positions, out.triangles[len(to):len(to) + len(ti)]) > 0
+    np.testing.assert_array_equal(rot_canon(out.triangles[:len(to)]), rot_canon(to))
+    # fully inside-out mesh: every face flips
+    out2, rep2 = orient(synth.rigid_mesh(po, to[:, ::-1]))
+    assert rep2.counts["faces_flipped"] == len(to)
+    assert naive.signed_volume(out2.positions, out2.triangles) > 0
+
+
+def test_orient_open_majority_and_mobius():
+    pos, tris = synth.icosphere(2)
+    keep = pos[tris].mean(1)[:, 2] > 0.2  # an open cap
+    cap = tris[keep]
+    rng = np.random.default_rng(1)
+    flip = rng.random(len(cap)) < 0.2
+    bad = cap.copy()
+    bad[flip] = bad[flip][:, ::-1]
+    out, rep = orient(synth.rigid_mesh(pos, bad))
+    assert rep.counts["open_shells"] == 1 and rep.counts["closed_shells"] == 0
+    assert rep.counts["faces_flipped"] == flip.sum()
+    np.testing.assert_array_equal(rot_canon(out.triangles), rot_canon(cap))
+    # all flipped: the majority is now inside-out, and open shells keep their majority
+    out, rep = orient(synth.rigid_mesh(pos, cap[:, ::-1]))
+    assert rep.counts["faces_flipped"] == 0
+    mp, mt = synth.mobius()
+    out, rep = orient(synth.rigid_mesh(mp, mt))
+    assert rep.counts["inconsistent_edges_remaining"] >= 1
+    assert rep.counts["inconsistent_edges_remaining"] == naive.inconsistent_edges(out.triangles)
+    assert any("non-orientable" in w for w in rep.warnings)
+
+
+# -- parts -------------------------------------------------------------------------------------
+
+def test_parts_dominant_matches_naive():
+    mesh = synth.make_tube()
+    # a few exact ties between two joints
+    jw = mesh.joint_weights.copy()
+    t0 = mesh.triangles[5]
+    jw[t0] = [0.5, 0.5, 0.0, 0.0]
+    mesh = mesh.replace(joint_weights=jw)
+    snap = snapshot(mesh)
+    out, rep = parts(mesh)
+    assert_unchanged(mesh, snap)
+    dom = naive.dominant_joints(mesh.triangles, mesh.joint_indices, mesh.joint_weights)
+    assert dom[5] == 0
+    P = out.parts
+    assert rep.counts["parts"] == len(P) == len(np.unique(dom))
+    assert rep.counts["overlapping_faces"] == 0 and rep.counts["mode"] == "dominant"
+    assert list(P.joints) == sorted(np.unique(dom))
+    for p in range(len(P)):
+        np.testing.assert_array_equal(P.part_faces(p), np.flatnonzero(dom == P.joints[p]))
+    assert rep.counts["faces_per_part_min"] == np.diff(P.face_offsets).min()
+
+
+def test_parts_any_and_folding():
+    mesh = synth.make_tube()
+    thr = 0.2
+    out, rep = parts(mesh, mode="any", threshold=thr)
+    dom = naive.dominant_joints(mesh.triangles, mesh.joint_indices, mesh.joint_weights)
+    P = out.parts
+    for p, j in enumerate(P.joints):
+        want = [f for f, t in enumerate(mesh.triangles)
+                if dom[f] == j or any(w >= thr and jj == j for v in t
+                                      for jj, w in zip(mesh.joint_indices[v], mesh.joint_weights[v]))]
+        np.testing.assert_array_equal(P.part_faces(p), want)
+    member = np.bincount(P.faces, minlength=mesh.face_count)
+    assert member.min() >= 1
+    assert rep.counts["overlapping_faces"] == (member > 1).sum() > 0
+    # folding: the tip owns fewer faces than asked, folds into mid; cascading into the root
+    counts = np.bincount(dom, minlength=3)
+    assert counts.min() > 0 and counts[0] < counts[2] + 1  # the root is short too, but never folds
+    out, rep = parts(mesh, min_part_faces=counts[2] + 1)
+    assert rep.counts["folded_joints"] == ["tip"]
+    assert list(out.parts.joints) == [0, 1]
+    np.testing.assert_array_equal(out.parts.part_faces(1), np.flatnonzero(dom >= 1))
+    out, rep = parts(mesh, min_part_faces=mesh.face_count + 1)  # everything cascades to the root
+    assert rep.counts["folded_joints"] == ["mid", "tip"]
+    assert list(out.parts.joints) == [0]
+    np.testing.assert_array_equal(out.parts.part_faces(0), np.arange(mesh.face_count))
+    out, rep = parts(mesh, mode="any", threshold=thr, min_part_faces=mesh.face_count + 1)
+    np.testing.assert_array_equal(out.parts.part_faces(0), np.arange(mesh.face_count))
+    assert rep.counts["overlapping_faces"] == 0
+    with pytest.raises(ValueError):
+        parts(mesh, mode="nope")
+
+
+# -- minimal sphere ------------------------------------------------------------------------------
+
+def test_min_sphere_matches_brute_force():
+    rng = np.random.default_rng(7)
+    for trial in range(160):
+        n = int(rng.integers(1, 9))
+        p = rng.normal(size=(n, 3)) * rng.uniform(0.01, 100) + rng.normal(size=3) * 10
+        kind = trial % 5
+        if kind == 1:
+            p[:, 2] = 0.5  # coplanar
+        elif kind == 2:
+            p = np.outer(rng.normal(size=n), rng.normal(size=3)) + 1.0  # collinear
+        elif kind == 3:
+            p = np.repeat(p[: max(1, n // 2)], 2, axis=0)  # duplicates
+        elif kind == 4:
+            p = p.astype(np.float32)
+        c, r = min_sphere(p)
+        bc, br = naive.min_sphere_brute(p)
+        assert abs(r - br) <= 1e-9 * max(br, 1e-12) + 1e-12, (trial, r, br)
+        assert np.linalg.norm(p - c, axis=1).max() <= r
+
+
+def test_min_sphere_degenerate_and_large():
+    c, r = min_sphere([[1.0, 2.0, 3.0]])
+    np.testing.assert_array_equal(c, [1, 2, 3]) and r == 0.0
+    c, r = min_sphere(np.tile([[1.0, 2.0, 3.0]], (50, 1)))
+    assert r == 0.0
+    c, r = min_sphere([[0, 0, 0], [2, 0, 0]])
+    np.testing.assert_allclose(c, [1, 0, 0]) and abs(r - 1) < 1e-15
+    sq = np.array([[1, 1, 0], [1, -1, 0], [-1, 1, 0], [-1, -1, 0]], float)  # cocircular
+    c, r = min_sphere(np.concatenate([sq] * 5))
+    assert abs(r - np.sqrt(2)) < 1e-12 and np.abs(c).max() < 1e-12
+    rng = np.random.default_rng(2)
+    v = rng.normal(size=(300_000, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    p = (v * rng.uniform(0, 1, (len(v), 1)) ** (1 / 3)).astype(np.float32)
+    p[:50] = v[:50] * 1.0  # some points on the unit sphere
+    c, r = min_sphere(p + np.float32(5.0))
+    assert r <= 1.0 + 1e-6 and np.linalg.norm(c - 5.0) < 1e-3
+    assert np.linalg.norm(p.astype(np.float64) + 5.0 - c, axis=1).max() <= r
+    with pytest.raises(ValueError):
+        min_sphere(np.zeros((0, 3)))
+    with pytest.raises(ValueError):
+        min_sphere([[np.nan, 0, 0]])
+    # batched per-frame spheres agree with the single version
+    q = rng.normal(size=(20, 40, 3)).astype(np.float32)
+    cs, rs = min_spheres(q)
+    for f in range(20):
+        c, r = min_sphere(q[f])
+        np.testing.assert_allclose(cs[f], c, atol=1e-12)
+        assert rs[f] == pytest.approx(r, rel=1e-12)
+
+
+# -- skinning and spheres ------------------------------------------------------------------------
+
+def test_skin_points_kernel_matches_reference():
+    mesh = synth.make_tube(around=8, rings=5, frames=3)
+    S, labels = pose_transforms(mesh)
+    assert len(S) == 1 + 2 * 3 and labels[0] == "bind"
+    mats = S @ np.linalg.inv(mesh.bind_transforms)[None] @ mesh.geom_bind
+    got = skin_points(mesh.positions, mesh.joint_indices, mesh.joint_weights, mats)
+    want = skin_points_ref(mesh, S)
+    np.testing.assert_allclose(got, want, atol=1e-5)
+    # joint space, against the python-loop reference
+    j = 2
+    got = skin_points(mesh.positions, mesh.joint_indices, mesh.joint_weights, np.linalg.inv(S[:, j, None]) @ mats)
+    for f in (0, 3, 6):
+        np.testing.assert_allclose(got[f], naive.skin_joint_space(mesh, j, S[f]), atol=1e-5)
+    with pytest.raises(ValueError):
+        skin_points(mesh.positions, mesh.joint_indices + 5, mesh.joint_weights, mats)
+
+
+@pytest.mark.parametrize("mode", ["dominant", "any"])
+def test_spheres_contain_every_frame(mode):
+    mesh, _ = parts(synth.make_tube(frames=6), mode=mode)
+    snap = snapshot(mesh)
+    out, rep = spheres(mesh)
+    assert_unchanged(mesh, snap)
+    P = out.parts
+    assert P.centers.dtype == np.float32 and P.radii.dtype == np.float32
+    np.testing.assert_array_equal(P.faces, mesh.parts.faces)
+    S = naive.all_poses(mesh)
+    skinned = skin_points_ref(mesh, S)  # (F, n, 3) skeleton space, float64
+    hom = np.concatenate([skinned, np.ones(skinned.shape[:2] + (1,))], axis=2)
+    assert rep.counts["parts"] == len(P)
+    for p, j in enumerate(P.joints):
+        verts = np.unique(mesh.triangles[P.part_faces(p)])
+        local = np.einsum("fij,fvj->fvi", np.linalg.inv(S[:, j]), hom[:, verts])[..., :3]
+        d = np.linalg.norm(local - P.centers[p].astype(np.float64), axis=2)
+        assert d.max() <= float(P.radii[p]), (p, d.max(), P.radii[p])
+        # near-minimal: the exact sphere of all poses' points is not much smaller
+        _, r_exact = naive_min_sphere_check(local.reshape(-1, 3))
+        assert float(P.radii[p]) <= r_exact * (1 + 1e-5) + 1e-4
+        det = rep.details["parts"][p]
+        assert det["joint"] == mesh.joint_names[j] and det["slack_ratio"] >= 1.0
+        tight = max(min_sphere(local[f])[1] for f in range(len(S)))
+        assert det["tight_radius"] == pytest.approx(tight, rel=1e-5)
+    assert rep.counts["max_radius"] == pytest.approx(float(P.radii.max()))
+    assert rep.counts["max_slack_ratio"] == pytest.approx(max(d["slack_ratio"] for d in rep.details["parts"]))
+
+
+def naive_min_sphere_check(points):
+    """Minimal sphere of float64 points (the kernel itself, checked against brute force above)."""
+    return min_sphere(np.asarray(points, dtype=np.float64))
+
+
+def test_spheres_needs_parts():
+    with pytest.raises(ValueError, match="parts"):
+        spheres(synth.make_tube())
