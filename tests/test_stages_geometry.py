@@ -13,7 +13,7 @@ from pipeline.geometry import min_sphere, min_spheres
 from pipeline.model import skel_transforms, skin_points as skin_points_ref
 from pipeline.stages.orient import orient
 from pipeline.stages.parts import parts
-from pipeline.stages.spheres import pose_transforms, skin_points, spheres
+from pipeline.stages.spheres import pose_transforms, skin_points, slack_pose_indices, spheres
 from pipeline.stages.weld import weld, weld_maps
 from pipeline.tolerances import WELD_WEIGHT
 
@@ -309,6 +309,8 @@ def test_skin_points_kernel_matches_reference():
     mesh = synth.make_tube(around=8, rings=5, frames=3)
     S, labels = pose_transforms(mesh)
     assert len(S) == 1 + 2 * 3 and labels[0] == "bind"
+    np.testing.assert_array_equal(slack_pose_indices(mesh), np.arange(7))
+    np.testing.assert_array_equal(slack_pose_indices(mesh, per_clip=2), [0, 1, 3, 4, 6])
     mats = S @ np.linalg.inv(mesh.bind_transforms)[None] @ mesh.geom_bind
     got = skin_points(mesh.positions, mesh.joint_indices, mesh.joint_weights, mats)
     want = skin_points_ref(mesh, S)
@@ -335,6 +337,7 @@ def test_spheres_contain_every_frame(mode):
     skinned = skin_points_ref(mesh, S)  # (F, n, 3) skeleton space, float64
     hom = np.concatenate([skinned, np.ones(skinned.shape[:2] + (1,))], axis=2)
     assert rep.counts["parts"] == len(P)
+    assert rep.counts["poses"] == rep.counts["slack_poses"] == len(S)
     for p, j in enumerate(P.joints):
         verts = np.unique(mesh.triangles[P.part_faces(p)])
         local = np.einsum("fij,fvj->fvi", np.linalg.inv(S[:, j]), hom[:, verts])[..., :3]

@@ -16,9 +16,10 @@ float64 skinned points (recomputed by a second kernel, not the float32 copies) t
 containment holds exactly for the stored values before the pad is added.
 
 ``slack_ratio`` compares the sphere with the tightest possible per-pose sphere: the radius over the
-largest per-pose minimal sphere radius of the part's points (exact, every pose: the bind pose and
-every clip frame).  It is >= 1; large values mean the part changes shape a lot in its joint's
-space (it is skinned to several joints that move apart).
+largest per-pose minimal sphere radius of the part's points, computed exactly on the bind pose and
+on up to :data:`SLACK_FRAMES_PER_CLIP` evenly spaced frames of each clip (all frames of shorter
+clips; a subset can only over-state the slack).  It is >= 1; large values mean the part changes
+shape a lot in its joint's space (it is skinned to several joints that move apart).
 """
 
 from __future__ import annotations
@@ -31,6 +32,49 @@ from pipeline.model import SkinnedMesh, Parts, skel_transforms
 from pipeline.stages import StageReport
 from pipeline.tolerances import SPHERE_PAD_RADIUS, SPHERE_PAD_RELATIVE, model_scale
 
+#: ``slack_ratio`` uses exact per-pose minimal spheres on the bind pose and on at most this many
+#: evenly spaced frames of each clip (first and last included): enough to characterise the slack,
+#: and it keeps the per-pose work bounded on long clips.  The containing sphere itself always
+#: covers every frame.
+SLACK_FRAMES_PER_CLIP = 32
+
+
+@njit(cache=True, inline="always")
+def _skin_one(pos, jidx, w, mats, f, v):
+    """Skinned position of vertex ``v`` in pose ``f`` (float64)."""
+    x = np.float64(pos[v, 0])
+    y = np.float64(pos[v, 1])
+    z = np.float64(pos[v, 2])
+    ax = 0.0
+    ay = 0.0
+    az = 0.0
+    for c in range(jidx.shape[1]):
+        wt = np.float64(w[v, c])
+        if wt == 0.0:
+            continue
+        j = jidx[v, c]
+        ax += wt * (mats[f, j, 0, 0] * x + mats[f, j, 0, 1] * y + mats[f, j, 0, 2] * z + mats[f, j, 0, 3])
+        ay += wt * (mats[f, j, 1, 0] * x + mats[f, j, 1, 1] * y + mats[f, j, 1, 2] * z + mats[f, j, 1, 3])
+        az += wt * (mats[f, j, 2, 0] * x + mats[f, j, 2, 1] * y + mats[f, j, 2, 2] * z + mats[f, j, 2, 3])
+    return ax, ay, az
+
+
+@njit(cache=True)
+def _skin_frame(pos, jidx, w, mats, f, out):
+    for v in range(pos.shape[0]):
+        out[f, v, 0], out[f, v, 1], out[f, v, 2] = _skin_one(pos, jidx, w, mats, f, v)
+
+
+@njit(cache=True)
+def _frame_max_d2(pos, jidx, w, mats, f, cx, cy, cz):
+    best = 0.0
+    for v in range(pos.shape[0]):
+        ax, ay, az = _skin_one(pos, jidx, w, mats, f, v)
+        d = (ax - cx) ** 2 + (ay - cy) ** 2 + (az - cz) ** 2
+        if d > best:
+            best = d
+    return best
+
 
 @njit(parallel=True, cache=True)
 def _skin_points(pos, jidx, w, mats, out):
@@ -39,28 +83,8 @@ def _skin_points(pos, jidx, w, mats, out):
     ``jidx`` (n, k) int32, ``w`` (n, k) float32, ``mats`` (F, b, 3, 4) float64 per-pose skinning
     matrices (already including the change to the target space), ``out`` (F, n, 3) float32.
     """
-    F = mats.shape[0]
-    n = pos.shape[0]
-    k = jidx.shape[1]
-    for f in prange(F):
-        for v in range(n):
-            x = np.float64(pos[v, 0])
-            y = np.float64(pos[v, 1])
-            z = np.float64(pos[v, 2])
-            ax = 0.0
-            ay = 0.0
-            az = 0.0
-            for c in range(k):
-                wt = np.float64(w[v, c])
-                if wt == 0.0:
-                    continue
-                M = mats[f, jidx[v, c]]
-                ax += wt * (M[0, 0] * x + M[0, 1] * y + M[0, 2] * z + M[0, 3])
-                ay += wt * (M[1, 0] * x + M[1, 1] * y + M[1, 2] * z + M[1, 3])
-                az += wt * (M[2, 0] * x + M[2, 1] * y + M[2, 2] * z + M[2, 3])
-            out[f, v, 0] = ax
-            out[f, v, 1] = ay
-            out[f, v, 2] = az
+    for f in prange(mats.shape[0]):
+        _skin_frame(pos, jidx, w, mats, f, out)
 
 
 @njit(parallel=True, cache=True)
@@ -68,30 +92,9 @@ def _max_distance(pos, jidx, w, mats, cx, cy, cz):
     """Largest float64 distance from ``(cx, cy, cz)`` to a skinned point over every pose
     (same arguments as :func:`_skin_points`, nothing stored)."""
     F = mats.shape[0]
-    n = pos.shape[0]
-    k = jidx.shape[1]
     best = np.zeros(F)
     for f in prange(F):
-        bf = 0.0
-        for v in range(n):
-            x = np.float64(pos[v, 0])
-            y = np.float64(pos[v, 1])
-            z = np.float64(pos[v, 2])
-            ax = 0.0
-            ay = 0.0
-            az = 0.0
-            for c in range(k):
-                wt = np.float64(w[v, c])
-                if wt == 0.0:
-                    continue
-                M = mats[f, jidx[v, c]]
-                ax += wt * (M[0, 0] * x + M[0, 1] * y + M[0, 2] * z + M[0, 3])
-                ay += wt * (M[1, 0] * x + M[1, 1] * y + M[1, 2] * z + M[1, 3])
-                az += wt * (M[2, 0] * x + M[2, 1] * y + M[2, 2] * z + M[2, 3])
-            d = (ax - cx) ** 2 + (ay - cy) ** 2 + (az - cz) ** 2
-            if d > bf:
-                bf = d
-        best[f] = bf
+        best[f] = _frame_max_d2(pos, jidx, w, mats, f, cx, cy, cz)
     return np.sqrt(best.max())
 
 
@@ -151,6 +154,19 @@ def pose_transforms(mesh: SkinnedMesh) -> tuple[np.ndarray, list]:
     return np.concatenate(poses), labels
 
 
+def slack_pose_indices(mesh: SkinnedMesh, per_clip: int = SLACK_FRAMES_PER_CLIP) -> np.ndarray:
+    """Indices into :func:`pose_transforms` of the poses used for ``slack_ratio``: the bind pose
+    and at most ``per_clip`` evenly spaced frames of each clip (first and last included)."""
+    idx = [np.zeros(1, np.int64)]
+    start = 1
+    for c in mesh.clips:
+        n = c.frame_count
+        pick = np.arange(n) if n <= per_clip else np.unique(np.round(np.linspace(0, n - 1, per_clip)).astype(np.int64))
+        idx.append(start + pick)
+        start += n
+    return np.concatenate(idx)
+
+
 def _round_up_f32(x: float) -> np.float32:
     r = np.float32(x)
     if float(r) < x:
@@ -169,9 +185,10 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     -------
     (SkinnedMesh, StageReport)
         ``parts`` with float32 ``centers`` and ``radii``.  Report counts: ``parts``,
-        ``max_radius``, ``max_slack_ratio``, ``poses``, ``pad``; details: ``parts`` (a list of
-        ``{"part", "joint", "radius", "center", "slack_ratio", "tight_radius", "vertices"}``)
-        and ``slack_poses`` (which poses the tight radius was computed on).
+        ``max_radius``, ``max_slack_ratio``, ``poses``, ``slack_poses``, ``pad``; details:
+        ``parts`` (a list of ``{"part", "joint", "radius", "center", "slack_ratio",
+        "tight_radius", "vertices"}``), ``slack_poses`` (labels of the poses the tight radius was
+        computed on) and ``slack_note``.
     """
     if mesh.parts is None:
         raise ValueError("spheres: expected a mesh with parts (run the parts stage first), got parts=None")
@@ -185,6 +202,7 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     _, ji_all, jw_all, _ = _check_skin_args(mesh.positions, mesh.joint_indices, mesh.joint_weights,
                                             to_skel[:1, :, :3, :])
 
+    slack_idx = slack_pose_indices(mesh)
     P = len(parts_in)
     centers = np.zeros((P, 3), np.float32)
     radii = np.zeros(P, np.float32)
@@ -197,7 +215,7 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
         pts = np.empty((len(S), len(verts), 3), np.float32)
         _skin_points(pos, ji, jw, mats, pts)
         center, r = min_sphere(pts.reshape(-1, 3))
-        _, frame_r = min_spheres(pts)
+        _, frame_r = min_spheres(pts if len(slack_idx) == len(S) else pts[slack_idx])
         del pts
         c32 = center.astype(np.float32)
         c64 = c32.astype(np.float64)
@@ -223,11 +241,14 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
         "max_radius": float(radii.max()) if P else 0.0,
         "max_slack_ratio": float(max(slacks)) if slacks else None,
         "poses": len(S),
+        "slack_poses": int(len(slack_idx)),
         "pad": float(abs_pad),
     }
     report.details = {
         "parts": details,
-        "slack_poses": "exact per-pose minimal spheres over every pose: the bind pose and every clip frame",
+        "slack_poses": [labels[i] for i in slack_idx],
+        "slack_note": (f"tight radius = largest exact per-pose minimal sphere over the bind pose and up to "
+                       f"{SLACK_FRAMES_PER_CLIP} evenly spaced frames per clip"),
     }
     new_parts = Parts(parts_in.joints, parts_in.face_offsets, parts_in.faces, centers, radii)
     return mesh.replace(parts=new_parts), report

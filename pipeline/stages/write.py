@@ -67,10 +67,14 @@ def check_output_path(out_path) -> str:
     folder = os.path.dirname(os.path.abspath(out))
     if not os.path.isdir(folder):
         raise OutputError(f"{out}: output directory {folder} does not exist")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise OutputError(f"{out}: output directory {folder} is not writable")
     if os.path.isdir(out):
         raise OutputError(f"{out}: is a directory")
+    try:  # probe for real: access() says yes to root even where writing fails
+        fd, probe = tempfile.mkstemp(prefix=".colossus-", suffix=".probe", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise OutputError(f"{out}: output directory {folder} is not writable ({exc.strerror or exc})") from None
     return out
 
 
@@ -98,9 +102,9 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         raise ValueError("write needs a mesh with parts (run the parts and spheres stages)")
     ext = os.path.splitext(out)[1].lower()
     folder = os.path.dirname(os.path.abspath(out))
-    fd, tmp = tempfile.mkstemp(prefix=".colossus-", suffix=ext, dir=folder)
-    os.close(fd)
-    os.unlink(tmp)  # Usd.Stage.CreateNew refuses an existing file
+    from pxr import Tf
+
+    tmp = os.path.join(folder, f".colossus-{os.getpid()}-{os.urandom(4).hex()}{ext}")
     try:
         stage = Usd.Stage.CreateNew(tmp)
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if mesh.up_axis == "Y" else UsdGeom.Tokens.z)
@@ -184,6 +188,9 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
     except OSError as exc:
         _unlink(tmp)
         raise OutputError(f"{out}: cannot write ({exc.strerror or exc})") from None
+    except Tf.ErrorException as exc:
+        _unlink(tmp)
+        raise OutputError(f"{out}: cannot write ({' '.join(str(exc).split())[:200]})") from None
     except BaseException:
         _unlink(tmp)
         raise

@@ -1,0 +1,114 @@
+"""``colossus bench``: benchmarks printed as ratios against baselines run in the same process.
+
+Absolute times are this machine's; the ratios are what to compare across machines.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import time
+
+import click
+import numpy as np
+
+
+def _best(fn, repeat=3):
+    best = math.inf
+    out = None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def bench_import(triangles=200_000, bones=60, clips=2, frames=120, echo=print):
+    """Import a synthetic skinned tube (a real .glb); ratio of the whole import to assimp's load alone."""
+    import assimp_py
+
+    from .readers.assimp_reader import _flags
+    from .run import import_asset
+    from .synth.glb import write_glb
+
+    with tempfile.TemporaryDirectory() as tmp:
+        # warm the numba kernels (compiled once per machine, cached on disk)
+        small = os.path.join(tmp, "warm.glb")
+        write_glb(small, 2_000, 8, 1, 10)
+        import_asset(small, os.path.join(tmp, "warm.usda"))
+        src = os.path.join(tmp, "bench.glb")
+        nv, nf = write_glb(src, triangles, bones, clips, frames)
+        t_assimp, _ = _best(lambda: assimp_py.import_file(src, _flags()), 3)
+        t_import, res = _best(lambda: import_asset(src, os.path.join(tmp, "bench.usda")), 1)
+    echo(f"import: {nf} triangles, {nv} vertices, {bones} bones, {clips} clips x {frames} frames")
+    echo(f"  assimp load alone            {t_assimp:8.3f} s")
+    echo(f"  whole import (all stages)    {t_import:8.3f} s   = {t_import / t_assimp:6.1f} x assimp's load   (goal: < 10 s)")
+    for rep in res.reports:
+        echo(f"    {rep.stage:<8} {rep.seconds:8.3f} s")
+    return {"triangles": nf, "assimp_s": t_assimp, "import_s": t_import, "ratio": t_import / t_assimp,
+            "stages": {r.stage: r.seconds for r in res.reports}}
+
+
+def bench_scaling(sizes=(50_000, 200_000, 800_000), echo=print):
+    """Weld and orient at three sizes; time / (n log n) should stay flat (or fall)."""
+    from .model import SkinnedMesh
+    from .stages.orient import orient
+    from .stages.weld import weld
+    from .synth.glb import chain_weights, tube
+
+    rows = []
+    echo("weld and orient scaling (per-corner split tube, as FBX delivers it):")
+    echo(f"  {'triangles':>10} {'weld s':>8} {'orient s':>9} {'weld/(n log n)':>15} {'orient/(n log n)':>17}")
+    base = None
+    for n in sizes:
+        pos, faces = tube(n)
+        j, w = chain_weights(pos[:, 1].astype(np.float64), 8, 10.0)
+        corner = faces.reshape(-1)
+        rng = np.random.default_rng(0)
+        flip = rng.random(len(faces)) < 0.3
+        tri = np.arange(len(corner)).reshape(-1, 3)
+        tri[flip] = tri[flip][:, ::-1]
+        m = SkinnedMesh(positions=pos[corner], triangles=tri, joint_indices=j[corner], joint_weights=w[corner],
+                        joint_names=[f"j{i}" for i in range(8)], parents=np.arange(8) - 1,
+                        bind_transforms=np.tile(np.eye(4), (8, 1, 1)), rest_transforms=np.tile(np.eye(4), (8, 1, 1)))
+        tw, (wm, _) = _best(lambda: weld(m), 2)
+        to, _ = _best(lambda: orient(wm), 2)
+        nlogn = len(faces) * math.log(len(faces))
+        if base is None:
+            base = (tw / nlogn, to / nlogn)
+        rows.append({"triangles": len(faces), "weld_s": tw, "orient_s": to})
+        echo(f"  {len(faces):>10} {tw:8.3f} {to:9.3f} {tw / nlogn / base[0]:15.2f} {to / nlogn / base[1]:17.2f}")
+    echo("  (columns 4-5: time per n log n relative to the smallest size; <= ~1 means no worse than n log n)")
+    return rows
+
+
+@click.command("bench")
+@click.option("--quick", is_flag=True, help="Smaller sizes (a smoke run).")
+@click.option("--only", type=click.Choice(["import", "scaling", "validate", "runtime"]), multiple=True,
+              help="Run only these benchmarks (repeatable).")
+def bench_cmd(quick, only):
+    """Run the benchmarks; absolute times are this machine's, ratios are against in-process baselines."""
+    want = set(only) or {"import", "scaling", "validate", "runtime"}
+    click.echo(f"colossus bench on {os.cpu_count()} cores (absolute times are this machine's)\n")
+    if "import" in want:
+        bench_import(*((20_000, 20, 2, 30) if quick else ()), echo=click.echo)
+        click.echo()
+    if "scaling" in want:
+        bench_scaling((10_000, 40_000, 160_000) if quick else (50_000, 200_000, 800_000), echo=click.echo)
+        click.echo()
+    if "validate" in want:
+        try:
+            from validators.bench import format_bench, run_bench
+        except ImportError as exc:  # pragma: no cover
+            click.echo(f"validate benchmark unavailable: {exc}")
+        else:
+            click.echo(format_bench(run_bench()))
+            click.echo()
+    if "runtime" in want:
+        try:
+            from runtime.bench import format_bench as rt_format, run_bench as rt_run
+        except ImportError as exc:
+            click.echo(f"runtime benchmark unavailable: {exc}")
+        else:
+            click.echo(rt_format(rt_run()))

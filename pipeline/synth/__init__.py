@@ -1,0 +1,1 @@
+"""Synthetic skinned assets for benchmarks (real files that the real readers load)."""
