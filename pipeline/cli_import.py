@@ -77,10 +77,12 @@ def format_summary(result) -> str:
     parts = sph.details.get("parts", [])
     if parts:
         lines.append("")
-        lines.append(f"  {'part':>4} {'joint':<20} {'faces':>6} {'radius':>10} {'slack':>7}")
+        faces = result.mesh.parts.face_offsets
+        lines.append(f"  {'part':>4} {'joint':<20} {'faces':>6} {'vertices':>8} {'radius':>10} {'slack':>7}")
         for i, p in enumerate(parts):
-            lines.append(f"  {i:>4} {str(p.get('joint'))[:20]:<20} {p.get('faces', 0):>6} {p.get('radius', 0):>10.4g} "
-                         f"{p.get('slack_ratio', float('nan')):>7.3f}")
+            lines.append(f"  {i:>4} {str(p.get('joint'))[:20]:<20} {int(faces[i + 1] - faces[i]):>6} "
+                         f"{p.get('vertices', 0):>8} {p.get('radius', 0):>10.4g} {p.get('slack_ratio', float('nan')):>7.3f}")
+        lines.append("  (radius in joint space; slack = radius / tightest per-frame sphere)")
     for w in s["warnings"]:
         lines.append(f"warning: {w}")
     return "\n".join(lines)

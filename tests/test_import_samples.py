@@ -105,3 +105,35 @@ def test_flipped_sample_comes_out_outward(imported, samples_meta):
     tm = trimesh.Trimesh(m.positions, m.triangles, process=False)
     assert tm.is_winding_consistent and tm.volume > 0
     assert np.array_equal(np.sort(np.sort(m.triangles, 1), 0), np.sort(np.sort(good.mesh.triangles, 1), 0))
+
+
+@pytest.mark.parametrize("model,ext", [(m, e) for m in MODELS for e in FORMATS] + [("limb_flipped", "glb")])
+def test_imported_assets_pass_every_validator(imported, model, ext):
+    import validators
+
+    _, out = imported(model, ext)
+    report = validators.check_asset(str(out))
+    assert report.passed, [f.message for f in report.findings]
+    assert not [f for f in report.findings if f.severity in ("error", "warning")]
+
+
+def test_provenance_and_metadata(imported):
+    from pxr import Usd, UsdGeom
+
+    from pipeline.run import sha256_of
+    from conftest import SAMPLES
+
+    _, out = imported("creature", "fbx")
+    stage = Usd.Stage.Open(str(out))
+    assert UsdGeom.GetStageUpAxis(stage) == "Y"
+    assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    assert stage.GetTimeCodesPerSecond() == 24.0
+    root = stage.GetDefaultPrim()
+    assert root.GetTypeName() == "SkelRoot"
+    mesh = root.GetChild("Collider")
+    prov = mesh.GetCustomDataByKey("colossus")
+    assert prov["source"] == "creature.fbx"
+    assert prov["sourceSha256"] == sha256_of(SAMPLES / "creature.fbx")
+    assert prov["importer"].startswith("colossus ")
+    assert prov["settings"]["max_influences"] == 4
+    assert [c.GetName() for c in root.GetChildren() if c.GetTypeName() == "SkelAnimation"] == ["roar", "walk"]

@@ -7,6 +7,8 @@
   clip, sampled at its own joint-transform time samples.  Blender's USD export writes only the
   active action, so its files have one clip.
 * Units and axes come from the stage's ``metersPerUnit`` and ``upAxis``.
+* Rest transforms are the bind pose made joint-local (the file's ``restTransforms`` are not
+  used): joints a clip does not animate hold their bind pose.
 """
 
 from __future__ import annotations
@@ -126,13 +128,11 @@ def read_usd(path, meshes=None, fps=None) -> SkinnedMesh:
         raise InputError(path, f"skeleton has {0 if bind_attr is None else len(bind_attr)} bindTransforms for {nj} joints")
     bind = _m44(bind_attr)
     check_finite(path, "bind transforms", bind.reshape(nj, -1))
-    rest_attr = skel.GetRestTransformsAttr().Get()
-    if rest_attr is not None and len(rest_attr) == nj:
-        rest_local = _m44(rest_attr)
-    else:
-        rest_local = np.empty_like(bind)
-        for k, p in enumerate(parents):
-            rest_local[k] = bind[k] if p < 0 else np.linalg.solve(bind[p], bind[k])
+    # The rest pose is the bind pose expressed joint-local, as for every other format (Blender's
+    # USD export writes restTransforms that do not compose to its bindTransforms).
+    rest_local = np.empty_like(bind)
+    for k, p in enumerate(parents):
+        rest_local[k] = bind[k] if p < 0 else np.linalg.solve(bind[p], bind[k])
     xf_cache = UsdGeom.XformCache(early)
     skel_w0 = _m44(xf_cache.GetLocalToWorldTransform(skel.GetPrim()))
 
@@ -233,10 +233,12 @@ def read_usd(path, meshes=None, fps=None) -> SkinnedMesh:
         clips.append(Clip(clip_name(prim.GetName(), taken), np.array(times, dtype=np.float64), local))
 
     jnames = [j.split("/")[-1] for j in joints]
+    rest_world = rest_local.copy()  # skeleton space is world space: roots carry the skeleton's transform
+    rest_world[parents < 0] = skel_w0 @ rest_local[parents < 0]
     return SkinnedMesh(
         positions=np.concatenate(pos_list).astype(np.float32), triangles=np.concatenate(tri_list),
         joint_indices=ji, joint_weights=jw, joint_names=jnames, parents=parents,
-        bind_transforms=skel_w0 @ bind, rest_transforms=rest_local, geom_bind=geom_bind,
+        bind_transforms=skel_w0 @ bind, rest_transforms=rest_world, geom_bind=geom_bind,
         clips=tuple(clips), up_axis=str(up), meters_per_unit=mpu,
         time_codes_per_second=float(fps) if fps else tcps,
         source={"file": os.path.basename(path), "format": os.path.splitext(path)[1].lstrip(".").lower(),

@@ -2,9 +2,10 @@
 
 Applies the mesh-to-skeleton bind transform (``geom_bind``) to the points and converts the whole
 rig from the source's axes and units to the output convention (Y-up metres by default).  The
-conversion ``C`` (a rotation about X and a uniform scale) conjugates every joint transform,
-``M' = C @ M @ inv(C)``, so joint spaces stay rigid and in output units, and skinned points come
-out as ``C @ skinned``.
+conversion ``C`` (a rotation about X and a uniform scale) is put in front of skeleton space: bind
+transforms and the root joints' local transforms become ``C @ M``, so every joint keeps the
+source's own joint space (a Blender FBX, whose armature node carries x100 and whose bones are in
+metres, ends up with unit-scale joints) and skinned points come out as ``C @ skinned``.
 """
 
 from __future__ import annotations
@@ -25,16 +26,25 @@ def bake(mesh: SkinnedMesh, up_axis: str = "Y", meters_per_unit: float = 1.0):
         The baked mesh has ``geom_bind`` = identity.
     """
     c = axis_conversion(mesh.up_axis, up_axis, mesh.meters_per_unit, meters_per_unit)
-    c_inv = np.linalg.inv(c)
+    roots = mesh.parents < 0
 
-    def conj(m):
-        return c @ m @ c_inv
+    def front(m):
+        """``C @ m`` for the root joints of (..., b, 4, 4) local transforms."""
+        out = np.array(m, dtype=np.float64, copy=True)
+        out[..., roots, :, :] = c @ out[..., roots, :, :]
+        return affine(out)
+
+    def affine(m):
+        """Exact (0, 0, 0, 1) last rows: inverting source matrices leaves ~1e-9 residue there."""
+        m = np.array(m, dtype=np.float64, copy=True)
+        m[..., 3, :] = (0.0, 0.0, 0.0, 1.0)
+        return m
 
     positions = apply_points(c @ mesh.geom_bind, mesh.positions).astype(np.float32)
-    clips = tuple(Clip(cl.name, cl.times, conj(cl.local)) for cl in mesh.clips)
+    clips = tuple(Clip(cl.name, cl.times, front(cl.local)) for cl in mesh.clips)
     out = mesh.replace(
-        positions=positions, geom_bind=np.eye(4), bind_transforms=conj(mesh.bind_transforms),
-        rest_transforms=conj(mesh.rest_transforms), clips=clips, up_axis=up_axis,
+        positions=positions, geom_bind=np.eye(4), bind_transforms=affine(c @ mesh.bind_transforms),
+        rest_transforms=front(mesh.rest_transforms), clips=clips, up_axis=up_axis,
         meters_per_unit=float(meters_per_unit),
     )
     scale = float(mesh.meters_per_unit) / float(meters_per_unit)
