@@ -102,7 +102,6 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None):
     s = settings or ImportSettings()
     s.check()
     reports = []
-    stages = STAGES[:-1]
 
     def step(i, name, fn):
         if progress:
@@ -138,7 +137,6 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None):
     mesh = step(4, "bind", lambda: bind(mesh, s.max_influences, s.unweighted))
     mesh = step(5, "parts", lambda: parts(mesh, s.parts, s.min_part_faces, s.parts_threshold))
     mesh = step(6, "spheres", lambda: spheres(mesh))
-    assert len(stages) == 7
     return mesh, reports
 
 
