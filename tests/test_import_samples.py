@@ -137,3 +137,29 @@ def test_provenance_and_metadata(imported):
     assert prov["importer"].startswith("colossus ")
     assert prov["settings"]["max_influences"] == 4
     assert [c.GetName() for c in root.GetChildren() if c.GetTypeName() == "SkelAnimation"] == ["roar", "walk"]
+
+
+def test_several_meshes_merged_or_chosen(tmp_path):
+    """Default: every mesh skinned to the skeleton, merged; --mesh NAME picks (repeatable)."""
+    import shutil
+
+    from pxr import Gf, Sdf, Usd
+
+    from conftest import SAMPLES
+    from pipeline.run import ImportSettings, import_asset
+
+    src = tmp_path / "two_limbs.usda"
+    shutil.copy(SAMPLES / "limb.usda", src)
+    stage = Usd.Stage.Open(str(src))
+    layer = stage.GetRootLayer()
+    assert Sdf.CopySpec(layer, "/root/LimbArmature/Limb", layer, "/root/LimbArmature/Limb2")
+    pts = stage.GetPrimAtPath("/root/LimbArmature/Limb2/Limb").GetAttribute("points")
+    pts.Set([p + Gf.Vec3f(2.0, 0, 0) for p in pts.Get()])  # a second limb, 2 m along X
+    stage.GetRootLayer().Save()
+
+    both = import_asset(src, tmp_path / "both.usda").mesh
+    assert both.vertex_count == 2 * 386 and both.face_count == 2 * 768
+    one = import_asset(src, tmp_path / "one.usda", ImportSettings(meshes=["/root/LimbArmature/Limb2/Limb"])).mesh
+    assert one.vertex_count == 386
+    # the chosen copy sits 2 m to the side of the original (Blender X stays X in Y-up output)
+    assert abs((one.positions[:, 0].mean() - both.positions[:386, 0].mean()) - 2.0) < 1e-4
