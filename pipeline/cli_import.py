@@ -144,24 +144,22 @@ def import_cmd(src, out, up_axis, meters_per_unit, max_influences, unweighted, p
             big = False
         progress = big and sys.stderr.isatty()
 
-    bar = None
-    if progress:
-        bar = click.progressbar(length=8, label="importing", file=sys.stderr, show_pos=True,
-                                item_show_func=lambda s: s or "")
+    tty = sys.stderr.isatty()
 
     def on_stage(i, n, name):
-        if bar is not None:
-            bar.update(i - bar.pos, name)
+        """A one-line bar redrawn in place on a terminal; one line per stage otherwise."""
+        if not progress:
+            return
+        done = int(24 * i / n)
+        line = f"importing [{'#' * done}{'-' * (24 - done)}] {i}/{n} {name}"
+        click.echo(("\r" + line.ljust(60)) if tty else line, err=True, nl=not tty)
 
     def go():
-        try:
-            if bar is not None:
-                bar.__enter__()
-            return import_asset(src, out, settings, progress=on_stage)
-        finally:
-            if bar is not None:
-                bar.update(8 - bar.pos, "done")
-                bar.__exit__(None, None, None)
+        result = import_asset(src, out, settings, progress=on_stage)
+        on_stage(8, 8, "done")
+        if progress and tty:
+            click.echo("", err=True)
+        return result
 
     result = run_guarded(go)
     if as_json:

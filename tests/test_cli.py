@@ -57,3 +57,12 @@ def test_mesh_option_unknown_name(tmp_path):
     proc = subprocess.run(COLOSSUS + ["import", str(SAMPLES / "creature.glb"), "-o", str(out), "--mesh", "Creature"],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
+
+
+def test_progress_bar_on_request(tmp_path):
+    out = tmp_path / "limb.usda"
+    proc = subprocess.run(COLOSSUS + ["import", str(SAMPLES / "limb.glb"), "-o", str(out), "--progress"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "importing" in proc.stderr and "8/8" in proc.stderr
+    assert "importing" not in proc.stdout
