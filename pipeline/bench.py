@@ -107,7 +107,7 @@ def bench_cmd(quick, only):
             click.echo()
     if "runtime" in want:
         try:
-            from runtime.bench import format_bench as rt_format, run_bench as rt_run
+            from runtime.bench import format_rows as rt_format, run_bench as rt_run
         except ImportError as exc:
             click.echo(f"runtime benchmark unavailable: {exc}")
         else:

@@ -1,0 +1,426 @@
+"""Reading a collider asset with plain usd-core into numpy arrays (no per-element Python loops).
+
+The layout is the contract's (``../shared/CONTRACT.md``): one ``SkelRoot`` (the default prim)
+holding a ``Skeleton``, a triangle ``Mesh`` bound to it with UsdSkel influences and the
+``colossus:parts:*`` attributes, and one ``SkelAnimation`` per clip (file order).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import ColliderError
+
+PARTS = "colossus:parts:"
+
+
+@dataclass
+class ClipData:
+    """One ``SkelAnimation``: per-attribute sample times and values, as UsdSkel reads them.
+
+    ``tt/vt`` translations (nT,), (nT, A, 3); ``tr/vr`` rotations (nR,), (nR, A, 4) as
+    ``(x, y, z, w)``; ``ts/vs`` scales (nS,), (nS, A, 3); all float64. ``anim_to_skel`` (A,)
+    int64 maps the animation's joints to the skeleton's. ``times`` is the union of sample times.
+    """
+
+    name: str
+    path: str
+    tt: np.ndarray
+    vt: np.ndarray
+    tr: np.ndarray
+    vr: np.ndarray
+    ts: np.ndarray
+    vs: np.ndarray
+    anim_to_skel: np.ndarray
+    times: np.ndarray
+
+
+@dataclass
+class ColliderData:
+    """Everything the runtime needs, as arrays with documented shapes.
+
+    rest_points (V, 3) float32, triangles (F, 3) int64, joint_indices (V, k) int32 (skeleton
+    order), joint_weights (V, k) float32, bind / inv_bind / rest_local (J, 4, 4) float64,
+    parents (J,) int64, topo_order (J,) int64 (parents first), geom_bind (4, 4),
+    part_joint (P,) int64, part_centers (P, 3) float64, part_radii (P,) float64,
+    face_offsets (P+1,) / faces: CSR faces of each part, vert_offsets (P+1,) / verts: CSR
+    vertices of each part, face_part (F,) first part holding each face; each part's faces are
+    ordered along a Morton curve and cut into chunks: chunk_offsets (C+1,) into ``faces``,
+    part_chunks (P+1,) into the chunks. pj_*: CSR per part of (joint, bind-space sphere of the
+    part's vertices that joint influences), for culling bounds without skinning; ``convex``:
+    every weight >= 0 and each vertex's weights sum to 1 (what those bounds need).
+    """
+
+    path: str
+    root_path: str
+    skeleton_path: str
+    mesh_path: str
+    up_axis: str
+    meters_per_unit: float
+    time_codes_per_second: float
+    joints: list
+    parents: np.ndarray
+    topo_order: np.ndarray
+    bind: np.ndarray
+    inv_bind: np.ndarray
+    rest_local: np.ndarray
+    geom_bind: np.ndarray
+    rest_points: np.ndarray
+    triangles: np.ndarray
+    joint_indices: np.ndarray
+    joint_weights: np.ndarray
+    part_joint: np.ndarray
+    part_centers: np.ndarray
+    part_radii: np.ndarray
+    face_offsets: np.ndarray
+    faces: np.ndarray
+    vert_offsets: np.ndarray
+    verts: np.ndarray
+    face_part: np.ndarray
+    chunk_offsets: np.ndarray
+    part_chunks: np.ndarray
+    pj_offsets: np.ndarray
+    pj_joint: np.ndarray
+    pj_center: np.ndarray
+    pj_radius: np.ndarray
+    convex: bool
+    clips: list = field(default_factory=list)
+    static_local_to_world: np.ndarray | None = None
+    stage: object = None  # kept open only when the skeleton's transform is animated
+
+
+def _mats(value, what):
+    a = np.asarray(value, dtype=np.float64) if value is not None else None
+    if a is None or a.ndim != 3 or a.shape[1:] != (4, 4):
+        raise ColliderError(f"{what} is missing or not an array of 4x4 matrices")
+    return a
+
+
+def _get(prim, name, what=None):
+    attr = prim.GetAttribute(name)
+    value = attr.Get() if attr and attr.HasAuthoredValue() else None
+    if value is None:
+        raise ColliderError(f"{prim.GetPath()} has no {what or name}")
+    return value
+
+
+def _find_prims(stage):
+    from pxr import UsdSkel
+
+    root = stage.GetDefaultPrim()
+    if not root or not root.IsA(UsdSkel.Root):
+        root = next((p for p in stage.Traverse() if p.IsA(UsdSkel.Root)), None)
+    if root is None:
+        raise ColliderError("no SkelRoot prim (the default prim should be one)")
+    meshes = [p for p in root.GetChildren() if p.GetTypeName() == "Mesh"]
+    meshes = meshes or [p for p in stage.Traverse() if p.GetTypeName() == "Mesh" and
+                        str(p.GetPath()).startswith(str(root.GetPath()) + "/")]
+    withparts = [m for m in meshes if m.GetAttribute(PARTS + "joints")]
+    if not withparts:
+        raise ColliderError(f"no Mesh with {PARTS}* attributes under {root.GetPath()}")
+    mesh = withparts[0]
+    skel = None
+    p = mesh
+    while p and p.GetPath() != root.GetPath().GetParentPath() and skel is None:
+        r = UsdSkel.BindingAPI(p).GetSkeletonRel()
+        t = r.GetTargets() if r else []
+        if t:
+            skel = stage.GetPrimAtPath(t[0])
+        p = p.GetParent()
+    if skel is None or not skel.IsA(UsdSkel.Skeleton):
+        skel = next((c for c in root.GetChildren() if c.IsA(UsdSkel.Skeleton)), None)
+    if skel is None:
+        raise ColliderError(f"no Skeleton bound to {mesh.GetPath()}")
+    anims = [c for c in root.GetChildren() if c.IsA(UsdSkel.Animation)]
+    return root, skel, mesh, anims
+
+
+def _samples(attr, count, width, what):
+    """(times (n,), values (n, count, width)) of an attribute; a default value is one sample."""
+    times = list(attr.GetTimeSamples()) if attr else []
+    if times:
+        vals = [attr.Get(t) for t in times]
+    else:
+        v = attr.Get() if attr else None
+        if v is None:
+            raise ColliderError(f"{what} has no values")
+        times, vals = [0.0], [v]
+    try:
+        arr = np.stack([np.asarray(v, dtype=np.float64) for v in vals])
+    except ValueError:
+        raise ColliderError(f"{what}: time samples have different lengths") from None
+    if arr.shape[1:] != (count, width):
+        raise ColliderError(f"{what}: expected {count} values of {width} per sample, got shape {arr.shape[1:]}")
+    return np.asarray(times, dtype=np.float64), np.ascontiguousarray(arr)
+
+
+def _read_clip(prim, joint_index):
+    from pxr import UsdSkel
+
+    anim = UsdSkel.Animation(prim)
+    where = str(prim.GetPath())
+    ajoints = list(anim.GetJointsAttr().Get() or [])
+    if not ajoints:
+        raise ColliderError(f"clip {prim.GetName()!r} ({where}) has no joints")
+    A = len(ajoints)
+    tt, vt = _samples(anim.GetTranslationsAttr(), A, 3, f"{where}.translations")
+    tr, vr = _samples(anim.GetRotationsAttr(), A, 4, f"{where}.rotations")
+    ts, vs = _samples(anim.GetScalesAttr(), A, 3, f"{where}.scales")
+    amap = np.array([joint_index.get(str(j), -1) for j in ajoints], dtype=np.int64)
+    keep = amap >= 0  # animation joints the skeleton lacks are ignored (UsdSkel's AnimMapper)
+    times = np.union1d(np.union1d(tt, tr), ts) if any(
+        a.HasAuthoredValue() and a.GetNumTimeSamples() for a in
+        (anim.GetTranslationsAttr(), anim.GetRotationsAttr(), anim.GetScalesAttr())) else np.zeros(0)
+    return ClipData(
+        name=prim.GetName(), path=where,
+        tt=tt, vt=np.ascontiguousarray(vt[:, keep]), tr=tr, vr=np.ascontiguousarray(vr[:, keep]),
+        ts=ts, vs=np.ascontiguousarray(vs[:, keep]), anim_to_skel=amap[keep], times=times)
+
+
+def _csr_vertices(triangles, face_offsets, faces):
+    """CSR of the distinct vertices of each part's faces."""
+    P = len(face_offsets) - 1
+    counts = np.diff(face_offsets)
+    part_of = np.repeat(np.arange(P), counts)
+    pv = np.stack([np.repeat(part_of, 3), triangles[faces].ravel()], 1)
+    pv = np.unique(pv, axis=0)  # sorted by part then vertex
+    offs = np.searchsorted(pv[:, 0], np.arange(P + 1))
+    return offs.astype(np.int64), np.ascontiguousarray(pv[:, 1]).astype(np.int64)
+
+
+#: Faces per chunk: the second culling level under the part spheres.
+CHUNK_FACES = 16
+
+
+def _morton(q):
+    """Interleave three 10-bit integer coordinates (n, 3) into Morton codes (n,)."""
+    code = np.zeros(len(q), dtype=np.int64)
+    for bit in range(10):
+        for axis in range(3):
+            code |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
+    return code
+
+
+def _chunk_parts(points, triangles, face_offsets, faces, size=CHUNK_FACES):
+    """Reorder each part's faces along a Morton curve of their rest centroids and cut them into
+    chunks of ``size``: returns (faces reordered, chunk_offsets (C+1,), part_chunks (P+1,))."""
+    cent = points[triangles].mean(1)
+    out = np.empty_like(faces)
+    chunk_offsets = [0]
+    part_chunks = [0]
+    for p in range(len(face_offsets) - 1):
+        a, b = face_offsets[p], face_offsets[p + 1]
+        f = faces[a:b]
+        if len(f):
+            c = cent[f]
+            lo, hi = c.min(0), c.max(0)
+            q = ((c - lo) / np.maximum(hi - lo, 1e-30) * 1023).astype(np.int64)
+            f = f[np.argsort(_morton(q), kind="stable")]
+        out[a:b] = f
+        chunk_offsets.extend(range(a + size, b, size))
+        if b > a:
+            chunk_offsets.append(b)
+        part_chunks.append(len(chunk_offsets) - 1)
+    return out, np.array(chunk_offsets, dtype=np.int64), np.array(part_chunks, dtype=np.int64)
+
+
+def _part_joint_spheres(points, ji, jw, geom_bind, inv_bind, vert_offsets, verts):
+    """For each part and each joint influencing one of its vertices: the bounding sphere (box
+    centre, farthest point, padded for float32 weights) of those vertices in the joint's bind
+    space (``p @ geom_bind @ inv_bind[j]``). CSR: offsets (P+1,), joint (M,), centre (M, 3),
+    radius (M,)."""
+    P = len(vert_offsets) - 1
+    part_of = np.repeat(np.arange(P), np.diff(vert_offsets))
+    k = ji.shape[1]
+    pv = np.repeat(np.arange(len(verts)), k)  # index into verts
+    jj = ji[verts].ravel().astype(np.int64)
+    ww = jw[verts].ravel()
+    keep = ww != 0
+    pv, jj = pv[keep], jj[keep]
+    key = part_of[pv] * len(inv_bind) + jj
+    order = np.argsort(key, kind="stable")
+    pv, jj, key = pv[order], jj[order], key[order]
+    hom = np.c_[points[verts[pv]].astype(np.float64), np.ones(len(pv))] @ geom_bind
+    y = np.einsum("ni,nij->nj", hom, inv_bind[jj])[:, :3]
+    uk, start = np.unique(key, return_index=True)
+    lo = np.minimum.reduceat(y, start, axis=0)
+    hi = np.maximum.reduceat(y, start, axis=0)
+    centre = (lo + hi) / 2
+    grp = np.repeat(np.arange(len(uk)), np.diff(np.r_[start, len(key)]))
+    rad = np.zeros(len(uk))
+    np.maximum.at(rad, grp, np.linalg.norm(y - centre[grp], axis=1))
+    rad = rad * (1 + 1e-5) + 1e-6 * (1 + np.linalg.norm(centre, axis=1))
+    offsets = np.searchsorted(uk // len(inv_bind), np.arange(P + 1)).astype(np.int64)
+    return offsets, (uk % len(inv_bind)).astype(np.int64), np.ascontiguousarray(centre), rad
+
+
+def _static_local_to_world(prim):
+    from pxr import Usd, UsdGeom
+
+    p = prim
+    while p and not p.IsPseudoRoot():
+        x = UsdGeom.Xformable(p)
+        if x and x.TransformMightBeTimeVarying():
+            return None
+        p = p.GetParent()
+    return np.asarray(UsdGeom.Imageable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default()),
+                      dtype=np.float64)
+
+
+def read_collider(path) -> ColliderData:
+    """Read one asset into :class:`ColliderData`; :class:`ColliderError` with one line if it
+    cannot be read or does not follow the layout."""
+    try:
+        return _read(path)
+    except ColliderError as e:
+        raise ColliderError(f"{path}: {e}") from None
+    except Exception as e:  # pxr raises Tf errors of its own types
+        msg = " ".join(str(e).split()) or type(e).__name__
+        raise ColliderError(f"{path}: cannot read asset: {msg[:300]}") from None
+
+
+def _read(path) -> ColliderData:
+    from pxr import Sdf, Usd, UsdGeom, UsdSkel
+
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise ColliderError("no such file")
+    try:
+        layer = Sdf.Layer.FindOrOpen(path)
+    except Exception as e:
+        raise ColliderError(f"not a readable USD file ({' '.join(str(e).split())[:200]})") from None
+    if layer is None:
+        raise ColliderError("not a readable USD file")
+    stage = Usd.Stage.Open(layer, load=Usd.Stage.LoadAll)
+    if stage is None:
+        raise ColliderError("not a readable USD stage")
+    root, skel_prim, mesh, anims = _find_prims(stage)
+    skel = UsdSkel.Skeleton(skel_prim)
+
+    joints = [str(j) for j in (skel.GetJointsAttr().Get() or [])]
+    J = len(joints)
+    if J == 0:
+        raise ColliderError(f"{skel_prim.GetPath()} has no joints")
+    joint_index = {j: i for i, j in enumerate(joints)}
+    if len(joint_index) != J:
+        raise ColliderError(f"{skel_prim.GetPath()} has duplicate joint paths")
+    topo = UsdSkel.Topology(joints)
+    ok, why = topo.Validate()
+    if not ok:
+        raise ColliderError(f"{skel_prim.GetPath()} joint topology is invalid: {why}")
+    parents = np.asarray(topo.GetParentIndices(), dtype=np.int64)
+    depth = np.array([j.count("/") for j in joints])
+    topo_order = np.argsort(depth, kind="stable").astype(np.int64)
+
+    bind = _mats(skel.GetBindTransformsAttr().Get(), f"{skel_prim.GetPath()}.bindTransforms")
+    rest = _mats(skel.GetRestTransformsAttr().Get(), f"{skel_prim.GetPath()}.restTransforms")
+    if len(bind) != J or len(rest) != J:
+        raise ColliderError(f"{skel_prim.GetPath()}: {J} joints but {len(bind)} bindTransforms and "
+                            f"{len(rest)} restTransforms")
+    try:
+        inv_bind = np.linalg.inv(bind)
+    except np.linalg.LinAlgError:
+        raise ColliderError(f"{skel_prim.GetPath()}: a bind transform is singular") from None
+
+    # -- mesh
+    counts = np.asarray(_get(mesh, "faceVertexCounts"), dtype=np.int64)
+    if counts.size and (counts != 3).any():
+        raise ColliderError(f"{mesh.GetPath()} is not all triangles ({int((counts != 3).sum())} faces are not)")
+    fvi = np.asarray(_get(mesh, "faceVertexIndices"), dtype=np.int64)
+    if fvi.size != 3 * counts.size:
+        raise ColliderError(f"{mesh.GetPath()}: {counts.size} triangles but {fvi.size} face vertex indices")
+    tris = np.ascontiguousarray(fvi.reshape(-1, 3))
+    pts = np.ascontiguousarray(np.asarray(_get(mesh, "points"), dtype=np.float32))
+    V = len(pts)
+    if pts.ndim != 2 or pts.shape[1] != 3 or V == 0:
+        raise ColliderError(f"{mesh.GetPath()} has no points")
+    if tris.size and (tris.min() < 0 or tris.max() >= V):
+        raise ColliderError(f"{mesh.GetPath()}: face vertex index out of range 0..{V - 1}")
+    if not np.isfinite(pts).all():
+        raise ColliderError(f"{mesh.GetPath()}: points are not finite")
+
+    binding = UsdSkel.BindingAPI(mesh)
+    ji_pv, jw_pv = binding.GetJointIndicesPrimvar(), binding.GetJointWeightsPrimvar()
+    if not ji_pv or not jw_pv or ji_pv.Get() is None or jw_pv.Get() is None:
+        raise ColliderError(f"{mesh.GetPath()} has no primvars:skel:jointIndices/jointWeights")
+    k = ji_pv.GetElementSize()
+    if k < 1 or jw_pv.GetElementSize() != k:
+        raise ColliderError(f"{mesh.GetPath()}: jointIndices/jointWeights elementSize differ")
+    ji = np.asarray(ji_pv.Get(), dtype=np.int32)
+    jw = np.asarray(jw_pv.Get(), dtype=np.float32)
+    if ji_pv.GetInterpolation() == "constant":  # rigid binding: one influence set for all points
+        ji, jw = np.tile(ji, V), np.tile(jw, V)
+    if ji.size != V * k or jw.size != V * k:
+        raise ColliderError(f"{mesh.GetPath()}: {V} points x {k} influences expected, "
+                            f"got {ji.size} joint indices and {jw.size} weights")
+    ji = np.ascontiguousarray(ji.reshape(V, k))
+    jw = np.ascontiguousarray(jw.reshape(V, k))
+    mesh_joints = binding.GetJointsAttr().Get() if binding.GetJointsAttr() else None
+    if mesh_joints:  # skel:joints on the mesh: indices refer to that ordering
+        remap = np.array([joint_index.get(str(j), -1) for j in mesh_joints], dtype=np.int32)
+        if (remap < 0).any():
+            raise ColliderError(f"{mesh.GetPath()}: skel:joints names joints not in the skeleton")
+        if ji.size and (ji.min() < 0 or ji.max() >= len(remap)):
+            raise ColliderError(f"{mesh.GetPath()}: joint index out of range")
+        ji = np.ascontiguousarray(remap[ji])
+    elif ji.size and (ji.min() < 0 or ji.max() >= J):
+        raise ColliderError(f"{mesh.GetPath()}: joint index out of range 0..{J - 1}")
+    gb_attr = binding.GetGeomBindTransformAttr()
+    gb = gb_attr.Get() if gb_attr and gb_attr.HasAuthoredValue() else None
+    geom_bind = np.asarray(gb, dtype=np.float64) if gb is not None else np.eye(4)
+
+    # -- parts
+    where = f"{mesh.GetPath()}.{PARTS}"
+    pj = [str(j) for j in _get(mesh, PARTS + "joints")]
+    P = len(pj)
+    missing = [j for j in pj if j not in joint_index]
+    if missing:
+        raise ColliderError(f"{where}joints names {missing[0]!r}, not a skeleton joint")
+    part_joint = np.array([joint_index[j] for j in pj], dtype=np.int64)
+    centers = np.asarray(_get(mesh, PARTS + "centers"), dtype=np.float64).reshape(-1, 3)
+    radii = np.asarray(_get(mesh, PARTS + "radii"), dtype=np.float64).ravel()
+    offs = np.asarray(_get(mesh, PARTS + "faceOffsets"), dtype=np.int64).ravel()
+    faces = np.asarray(_get(mesh, PARTS + "faces"), dtype=np.int64).ravel()
+    if len(centers) != P or len(radii) != P or len(offs) != P + 1:
+        raise ColliderError(f"{where}*: {P} joints but {len(centers)} centers, {len(radii)} radii, "
+                            f"{len(offs)} faceOffsets (want {P + 1})")
+    if offs[0] != 0 or (np.diff(offs) < 0).any() or offs[-1] != len(faces):
+        raise ColliderError(f"{where}faceOffsets is not a CSR offset array into {len(faces)} faces")
+    F = len(tris)
+    if faces.size and (faces.min() < 0 or faces.max() >= F):
+        raise ColliderError(f"{where}faces: face index out of range 0..{F - 1}")
+    face_part = np.full(F, -1, dtype=np.int64)
+    part_of = np.repeat(np.arange(P), np.diff(offs))
+    face_part[faces[::-1]] = part_of[::-1]  # first part wins
+    if (face_part < 0).any():
+        raise ColliderError(f"{where}faces: {int((face_part < 0).sum())} faces are in no part")
+    vert_offsets, verts = _csr_vertices(tris, offs, faces)
+    faces, chunk_offsets, part_chunks = _chunk_parts(pts.astype(np.float64), tris, offs, faces)
+    pj = _part_joint_spheres(pts, ji, jw, geom_bind, inv_bind, vert_offsets, verts)
+    convex = bool((jw >= 0).all() and np.allclose(jw.sum(1, dtype=np.float64), 1.0, rtol=0, atol=1e-6))
+
+    clips = [_read_clip(a, joint_index) for a in anims]
+    names = [c.name for c in clips]
+    if len(set(names)) != len(names):
+        raise ColliderError("duplicate clip names")
+
+    l2w = _static_local_to_world(skel_prim)
+    return ColliderData(
+        path=path, root_path=str(root.GetPath()), skeleton_path=str(skel_prim.GetPath()),
+        mesh_path=str(mesh.GetPath()),
+        up_axis=str(UsdGeom.GetStageUpAxis(stage)),
+        meters_per_unit=float(UsdGeom.GetStageMetersPerUnit(stage)),
+        time_codes_per_second=float(stage.GetTimeCodesPerSecond()),
+        joints=joints, parents=parents, topo_order=topo_order,
+        bind=bind, inv_bind=inv_bind,
+        rest_local=np.ascontiguousarray(rest), geom_bind=np.ascontiguousarray(geom_bind),
+        rest_points=pts, triangles=tris, joint_indices=ji, joint_weights=jw,
+        part_joint=part_joint, part_centers=np.ascontiguousarray(centers), part_radii=radii,
+        face_offsets=offs, faces=faces, vert_offsets=vert_offsets, verts=verts,
+        face_part=face_part, chunk_offsets=chunk_offsets, part_chunks=part_chunks,
+        pj_offsets=pj[0], pj_joint=pj[1], pj_center=pj[2], pj_radius=pj[3], convex=convex, clips=clips, static_local_to_world=l2w,
+        stage=stage if l2w is None else None,
+    )

@@ -1,0 +1,304 @@
+"""Runtime benchmarks (printed by ``colossus bench``; not unit tests).
+
+The collider: :func:`make_bench_asset` writes a synthetic "centipede" through the same USD
+layout the importer writes: a tube of 250 rings x 80 vertices + 2 cap centres (20,002
+vertices, 40,000 triangles) skinned smoothly to a 40-joint chain (the 4 nearest joints, influences under 0.05 pruned
+and renormalised: 2-3 per vertex, like the imported samples' 1-4, mean 1.9), one part per
+joint (faces by dominant summed weight), part spheres fitted in joint space over the bind pose
+and every frame, and one 48-frame clip ``wave`` (a travelling bend with a twist).
+
+Rows (median of repeats; absolute times are THIS machine's):
+
+1. ``pose``: ``col.pose(clip, t, out=pose)`` (joint transforms at a fractional time, LBS into
+   the preallocated buffers, part spheres + culling spheres) vs ``UsdSkel.SkinPointsLBS`` alone
+   (skinning transforms precomputed, threaded).
+2. ``frame``: pose update + 1 player sphere contact query (radius 3.5% of the model size) +
+   16 rays a game casts around the player (8 ground probes, 2 radii long; 8 camera rays from
+   behind the player) - the runtime skins lazily, only the parts the queries reach - vs the
+   same frame with
+   trimesh: UsdSkel.SkinPointsLBS, a new ``trimesh.Trimesh`` on the posed points, its embree
+   ray intersector (``ray.intersects_first``, 16 rays) and ``trimesh.proximity.closest_point``
+   for the player.
+   Row 4 repeats row 2 with 16 rays crossing the whole model (worst case for lazy skinning).
+3. ``sphere``: one sphere contact query (all contacts) vs ``trimesh.proximity.closest_point``
+   (one closest point; mesh and its r-tree built once, not timed).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+
+import numpy as np
+
+RINGS, AROUND, JOINTS, FRAMES = 250, 80, 40, 48
+LENGTH, RADIUS = 8.0, 0.35
+
+
+def _quat_axis(axis, angle):
+    """(..., 4) (x, y, z, w) quaternions for rotations by ``angle`` about unit ``axis``."""
+    angle = np.asarray(angle, dtype=np.float64)
+    s = np.sin(angle / 2)[..., None] * np.asarray(axis, dtype=np.float64)
+    return np.concatenate([s, np.cos(angle / 2)[..., None]], -1)
+
+
+def _geometry():
+    theta = 2 * np.pi * np.arange(AROUND) / AROUND
+    xs = np.linspace(0.0, LENGTH, RINGS)
+    bulge = 1.0 + 0.25 * np.sin(xs * 3.0)
+    pts = np.empty((RINGS, AROUND, 3))
+    pts[..., 0] = xs[:, None]
+    pts[..., 1] = RADIUS * bulge[:, None] * np.cos(theta)[None] + 1.0
+    pts[..., 2] = RADIUS * bulge[:, None] * np.sin(theta)[None]
+    pts = np.concatenate([pts.reshape(-1, 3), [[0.0, 1.0, 0.0], [LENGTH, 1.0, 0.0]]])
+    i = np.arange(RINGS - 1)[:, None]
+    s = np.arange(AROUND)[None]
+    a, b = i * AROUND + s, i * AROUND + (s + 1) % AROUND
+    c, d = (i + 1) * AROUND + (s + 1) % AROUND, (i + 1) * AROUND + s
+    quads = np.stack([np.stack([a, b, c], -1), np.stack([a, c, d], -1)], 2).reshape(-1, 3)
+    cap0, cap1 = RINGS * AROUND, RINGS * AROUND + 1
+    s = np.arange(AROUND)
+    last = (RINGS - 1) * AROUND
+    caps = np.concatenate([np.stack([np.full(AROUND, cap0), (s + 1) % AROUND, s], 1),
+                           np.stack([np.full(AROUND, cap1), last + s, last + (s + 1) % AROUND], 1)])
+    return pts, np.concatenate([quads, caps]).astype(np.int64)
+
+
+def make_bench_asset(path):
+    """Write the benchmark collider (see the module docstring) to ``path``."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+
+    from .collider import load_collider
+
+    pts, tris = _geometry()
+    seg = LENGTH / JOINTS
+    names = [f"j{i:02d}" for i in range(JOINTS)]
+    joints = ["/".join(names[:i + 1]) for i in range(JOINTS)]
+    jx = (np.arange(JOINTS) + 0.5) * seg
+    # smooth weights over the 4 nearest joints
+    w = np.exp(-(((pts[:, 0:1] - jx[None]) / (0.6 * seg)) ** 2))
+    ji = np.argsort(-w, 1)[:, :4]
+    jw = np.take_along_axis(w, ji, 1)
+    jw /= jw.sum(1, keepdims=True)
+    jw[jw < 0.05] = 0.0  # negligible influences pruned, as an importer does: 2-3 per vertex
+    jw /= jw.sum(1, keepdims=True)
+    bind = np.repeat(np.eye(4)[None], JOINTS, 0)
+    bind[:, 3, 0] = np.arange(JOINTS) * seg
+    bind[:, 3, 1] = 1.0
+    rest = np.repeat(np.eye(4)[None], JOINTS, 0)
+    rest[1:, 3, 0] = seg
+    rest[0, 3, 1] = 1.0
+
+    stage = Usd.Stage.CreateNew(os.fspath(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    stage.SetTimeCodesPerSecond(24)
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(FRAMES - 1)
+    root = UsdSkel.Root.Define(stage, "/Centipede")
+    stage.SetDefaultPrim(root.GetPrim())
+    skel = UsdSkel.Skeleton.Define(stage, "/Centipede/Skeleton")
+    skel.CreateJointsAttr(joints)
+    skel.CreateBindTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(m.tolist()) for m in bind]))
+    skel.CreateRestTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(m.tolist()) for m in rest]))
+    anim = UsdSkel.Animation.Define(stage, "/Centipede/wave")
+    anim.CreateJointsAttr(joints)
+    ta, ra, sa = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr(), anim.CreateScalesAttr()
+    k = np.arange(JOINTS)
+    for f in range(FRAMES):
+        ph = 2 * np.pi * f / FRAMES
+        tr = rest[:, 3, :3].copy()
+        tr[0] += [0.4 * np.sin(ph), 0.2 * np.sin(2 * ph), 0.0]
+        bend = 0.12 * np.sin(ph - k * 0.5)
+        twist = 0.05 * np.cos(ph - k * 0.3)
+        q = _quat_axis([0, 0, 1], bend)
+        q2 = _quat_axis([1, 0, 0], twist)
+        # q * q2 (xyzw)
+        x1, y1, z1, w1 = np.moveaxis(q, -1, 0)
+        x2, y2, z2, w2 = np.moveaxis(q2, -1, 0)
+        qq = np.stack([w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2, w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                       w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2, w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2], 1)
+        ta.Set(Vt.Vec3fArray.FromNumpy(tr.astype(np.float32)), f)
+        ra.Set(Vt.QuatfArray([Gf.Quatf(float(v[3]), float(v[0]), float(v[1]), float(v[2])) for v in qq]), f)
+        sa.Set(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * JOINTS), f)
+    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+
+    mesh = UsdGeom.Mesh.Define(stage, "/Centipede/Collider")
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts.astype(np.float32)))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray([3] * len(tris)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray(tris.ravel().tolist()))
+    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    b = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    b.CreateSkeletonRel().SetTargets([skel.GetPath()])
+    b.CreateJointIndicesPrimvar(False, 4).Set(Vt.IntArray(ji.ravel().tolist()))
+    b.CreateJointWeightsPrimvar(False, 4).Set(Vt.FloatArray(jw.ravel().astype(np.float32).tolist()))
+    dense = np.zeros((len(pts), JOINTS))
+    np.add.at(dense, (np.repeat(np.arange(len(pts)), 4), ji.ravel()), jw.ravel())
+    owner = dense[tris].sum(1).argmax(1)
+    faces = np.argsort(owner, kind="stable")
+    offsets = np.searchsorted(owner[faces], np.arange(JOINTS + 1))
+    prim = mesh.GetPrim()
+    P = "colossus:parts:"
+    prim.CreateAttribute(P + "joints", Sdf.ValueTypeNames.TokenArray).Set(joints)
+    prim.CreateAttribute(P + "faceOffsets", Sdf.ValueTypeNames.IntArray).Set(Vt.IntArray(offsets.tolist()))
+    prim.CreateAttribute(P + "faces", Sdf.ValueTypeNames.IntArray).Set(Vt.IntArray(faces.tolist()))
+    prim.CreateAttribute(P + "centers", Sdf.ValueTypeNames.Float3Array).Set(
+        Vt.Vec3fArray.FromNumpy(np.zeros((JOINTS, 3), np.float32)))
+    radii = prim.CreateAttribute(P + "radii", Sdf.ValueTypeNames.FloatArray)
+    radii.Set(Vt.FloatArray([1e3] * JOINTS))
+    stage.GetRootLayer().Save()
+
+    # fit the spheres in joint space over the bind pose and every frame
+    col = load_collider(path, verify=False)
+    d = col.data
+    local = {p: [] for p in range(JOINTS)}
+    poses = [(None, 0.0, bind)] + [("wave", float(t), None) for t in col.frame_times("wave")]
+    pose = None
+    for clip, t, skel_x in poses:
+        if clip is None:
+            pts_t, sk = pts, bind
+        else:
+            pose = col.pose(clip, t, out=pose)
+            pts_t, sk = pose.points.astype(np.float64), pose.skel_transforms
+        for p in range(JOINTS):
+            v = d.verts[d.vert_offsets[p]:d.vert_offsets[p + 1]]
+            h = np.c_[pts_t[v], np.ones(len(v))] @ np.linalg.inv(sk[p])
+            local[p].append(h[:, :3])
+    centers, rads = np.zeros((JOINTS, 3)), np.zeros(JOINTS)
+    for p in range(JOINTS):
+        a = np.concatenate(local[p])
+        centers[p] = (a.min(0) + a.max(0)) / 2
+        rads[p] = np.linalg.norm(a - centers[p], axis=1).max() * 1.01 + 1e-4
+    prim.GetAttribute(P + "centers").Set(Vt.Vec3fArray.FromNumpy(centers.astype(np.float32)))
+    radii.Set(Vt.FloatArray(rads.tolist()))
+    stage.GetRootLayer().Save()
+    return path
+
+
+def _median_time(fn, repeat, warm=3):
+    for _ in range(warm):
+        fn()
+    ts = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t0)
+    return float(np.median(ts))
+
+
+def run_bench(path=None, repeat=50):
+    """Run the three benchmarks; returns rows of dicts ``name, ours_s, baseline_s, speedup,
+    goal, met, note`` (times in seconds, this machine's)."""
+    import trimesh
+    from pxr import Gf, Usd, UsdSkel, Vt
+
+    from .collider import load_collider
+
+    tmp = None
+    if path is None:
+        tmp = tempfile.TemporaryDirectory()
+        path = make_bench_asset(os.path.join(tmp.name, "centipede.usda"))
+    col = load_collider(path, verify=False)
+    d = col.data
+    rng = np.random.default_rng(0)
+    times = iter(rng.uniform(0, FRAMES - 1, 10 ** 6))
+    pose = col.pose("wave", 3.3)
+
+    # -- 1: pose update vs UsdSkel.SkinPointsLBS
+    ours1 = _median_time(lambda: col.pose("wave", next(times), out=pose).points, repeat)  # full skin
+    stage = Usd.Stage.Open(os.fspath(path))
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root(stage.GetDefaultPrim()), Usd.TraverseInstanceProxies())
+    skq = cache.GetSkelQuery(UsdSkel.Skeleton(stage.GetPrimAtPath("/Centipede/Skeleton")))
+    xf = skq.ComputeSkinningTransforms(3.3)
+    mesh_prim = stage.GetPrimAtPath("/Centipede/Collider")
+    ji = UsdSkel.BindingAPI(mesh_prim).GetJointIndicesPrimvar().Get()
+    jw = UsdSkel.BindingAPI(mesh_prim).GetJointWeightsPrimvar().Get()
+    rest = mesh_prim.GetAttribute("points").Get()
+    gb = Gf.Matrix4d(1)
+
+    def usd_lbs():
+        p = Vt.Vec3fArray(rest)
+        UsdSkel.SkinPointsLBS(gb, xf, ji, jw, 4, p, False)
+        return p
+
+    base1 = _median_time(usd_lbs, repeat)
+
+    # -- 2: a game frame
+    size = col.size()
+    r = 0.035 * size
+    pose = col.pose("wave", 10.0, out=pose)
+    player = pose.points[int(np.argmax(pose.points[:, 1]))].astype(np.float64) + [0, 0.5 * r, 0]
+    # 16 rays a game casts around the player: 8 ground probes in a downward fan (2 radii long)
+    # and 8 camera rays from 6 radii behind and above the player towards its surroundings
+    ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    fan = np.c_[0.4 * np.cos(ang), -np.ones(8), 0.4 * np.sin(ang)]
+    cam = player + [-6 * r, 3 * r, 0.5 * r]
+    look = player + rng.normal(scale=r, size=(8, 3))
+    o = np.r_[np.repeat(player[None], 8, 0), np.repeat(cam[None], 8, 0)]
+    dirs = np.r_[fan, look - cam]
+    # the same number of rays crossing the whole model (worst case, reported as row 4)
+    o_wide = player[None] + rng.normal(scale=0.2 * size, size=(16, 3)) + [0, size * 0.3, 0]
+    d_wide = pose.points[rng.integers(0, len(pose.points), 16)] - o_wide
+
+    def ours_frame(o=o, dirs=dirs, split=8):
+        p = col.pose("wave", next(times), out=pose)
+        p.sphere_contacts(player, r)
+        p.raycast(o[:split], dirs[:split], 2 * r)
+        p.raycast(o[split:], dirs[split:])
+
+    ours2 = _median_time(ours_frame, repeat)
+    ours4 = _median_time(lambda: ours_frame(o_wide, d_wide, 0), repeat)
+    tris = d.triangles
+    dn = dirs / np.linalg.norm(dirs, axis=1)[:, None]
+    embree = trimesh.ray.has_embree
+
+    def trimesh_frame():
+        pts = np.asarray(usd_lbs(), dtype=np.float64)
+        m = trimesh.Trimesh(pts, tris, process=False)
+        m.ray.intersects_first(o, dn)  # (probe lengths not limited: embree's cost is the build)
+        trimesh.proximity.closest_point(m, player[None])
+
+    base2 = _median_time(trimesh_frame, max(5, repeat // 5), warm=1)
+
+    # -- 3: sphere contact queries
+    m = trimesh.Trimesh(pose.points.astype(np.float64), tris, process=False)
+    centers = pose.points[rng.integers(0, len(pose.points), 64)].astype(np.float64) + rng.normal(scale=0.5 * r, size=(64, 3))
+    it = iter(range(10 ** 9))
+    ours3 = _median_time(lambda: pose.sphere_contacts(centers[next(it) % 64], r), repeat * 4)
+    trimesh.proximity.closest_point(m, centers[:1])  # build its r-tree once
+    it2 = iter(range(10 ** 9))
+    base3 = _median_time(lambda: trimesh.proximity.closest_point(m, centers[next(it2) % 64][None]),
+                         max(10, repeat // 2), warm=2)
+    if tmp is not None:
+        tmp.cleanup()
+
+    V, F = len(d.rest_points), len(d.triangles)
+    head = f"{V} vertices, {F} triangles, {len(d.joints)} joints, {col.parts} parts"
+    return [
+        dict(name="pose update (skin + spheres) vs UsdSkel.SkinPointsLBS", ours_s=ours1, baseline_s=base1,
+             speedup=base1 / ours1, goal=">= 2x", met=base1 / ours1 >= 2, note=head),
+        dict(name="game frame (pose + 1 sphere + 16 rays) vs trimesh" + (" + embree" if embree else ""),
+             ours_s=ours2, baseline_s=base2, speedup=base2 / ours2, goal=">= 10x and < 0.5 ms",
+             met=base2 / ours2 >= 10 and ours2 < 5e-4, note="baseline skins with UsdSkel, rebuilds the mesh"),
+        dict(name="sphere contacts vs trimesh.proximity.closest_point", ours_s=ours3, baseline_s=base3,
+             speedup=base3 / ours3, goal=">= 100x", met=base3 / ours3 >= 100,
+             note="ours: every contact; trimesh: one closest point"),
+        dict(name="game frame, 16 rays across the whole model instead", ours_s=ours4, baseline_s=base2,
+             speedup=base2 / ours4, goal="(worst case, no goal)", met=True,
+             note="rays reach most parts: most of the skin gets skinned lazily"),
+    ]
+
+
+def format_rows(rows) -> str:
+    lines = ["runtime benchmarks (absolute times are this machine's)"]
+    for r in rows:
+        lines.append(f"  {r['name']}: ours {r['ours_s'] * 1e3:.3f} ms, baseline {r['baseline_s'] * 1e3:.3f} ms, "
+                     f"{r['speedup']:.1f}x (goal {r['goal']}: {'met' if r['met'] else 'NOT met'}) - {r['note']}")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    print(format_rows(run_bench()))

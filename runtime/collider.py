@@ -1,0 +1,515 @@
+"""The runtime collider: posing (UsdSkel-exact skinning at any time) and queries.
+
+>>> col = load_collider("boss.usda")
+>>> pose = col.pose("walk", 12.5)          # any time code, interpolated between samples
+>>> hits = pose.raycast(origins, directions)
+>>> cs = pose.sphere_contacts(center, radius)
+>>> carried = cs.anchors().at(col.pose("walk", 13.0))   # momentum inheritance (thesis 5.5.3)
+
+Shapes follow the contract: points (V, 3) float32 stage space, spheres (P, 4) float64.
+Queries work in float64 on the float32 posed points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import kernels as K
+from .asset import ClipData, ColliderData, read_collider
+from .errors import ColliderError
+
+#: Above this many rays the parallel ray kernel is used.
+PARALLEL_RAYS = 256
+#: Above this many vertices skinning runs on every core.
+PARALLEL_SKIN = 50_000
+
+
+# -- results -----------------------------------------------------------------------------------
+
+
+@dataclass
+class RayHits:
+    """Nearest hit per ray. A miss has distance ``inf``, triangle and part ``-1``, point and
+    normal NaN, barycentric 0.
+
+    distance (R,) float64 (stage units along the normalised direction), point (R, 3),
+    normal (R, 3) unit geometric normal of the triangle (outward = counter-clockwise),
+    triangle (R,) int64, barycentric (R, 3) weights of the triangle's 3 vertices,
+    part (R,) int64 the first part (in part order) holding the triangle."""
+
+    distance: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    triangle: np.ndarray
+    barycentric: np.ndarray
+    part: np.ndarray
+
+    @property
+    def hit(self) -> np.ndarray:
+        """(R,) bool: which rays hit."""
+        return self.triangle >= 0
+
+    def __len__(self):
+        return len(self.distance)
+
+
+@dataclass
+class SphereContacts:
+    """Every triangle a sphere touches (closest point within the radius), each once, in the
+    order found (parts, then chunks; ``np.argsort(cs.triangle)`` to sort).
+
+    triangle (C,) int64, point (C, 3) closest point on the triangle, normal (C, 3) unit vector
+    from the point towards the sphere centre (the face normal if the centre is on the face),
+    depth (C,) radius - distance, barycentric (C, 3) of the point on its triangle."""
+
+    triangle: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    depth: np.ndarray
+    barycentric: np.ndarray
+
+    def __len__(self):
+        return len(self.triangle)
+
+    def anchors(self) -> "SurfacePoints":
+        """The contact points as surface points that move with the skin."""
+        return SurfacePoints(self.triangle, self.barycentric)
+
+    def resolve_vector(self) -> np.ndarray:
+        """(3,) the thesis' discrete resolution: the average of ``normal * depth`` over the
+        contacts (zeros when there are none)."""
+        if len(self) == 0:
+            return np.zeros(3)
+        return (self.normal * self.depth[:, None]).mean(0)
+
+
+@dataclass
+class SurfacePoints:
+    """Points glued to the skin by barycentric coordinates on triangles (thesis 5.5.3).
+
+    triangles (C,) int, barycentric (C, 3)."""
+
+    triangles: np.ndarray
+    barycentric: np.ndarray
+
+    def __post_init__(self):
+        self.triangles = np.ascontiguousarray(np.asarray(self.triangles, dtype=np.int64).ravel())
+        b = np.asarray(self.barycentric, dtype=np.float64)
+        if b.ndim == 2 and b.shape[1] == 2:  # (u, v) of vertices 1 and 2
+            b = np.column_stack([1.0 - b.sum(1), b])
+        if b.shape != (len(self.triangles), 3):
+            raise ValueError(f"barycentric must be ({len(self.triangles)}, 3) or "
+                             f"({len(self.triangles)}, 2), got {b.shape}")
+        self.barycentric = np.ascontiguousarray(b)
+
+    def __len__(self):
+        return len(self.triangles)
+
+    def at(self, pose: "Pose") -> np.ndarray:
+        """(C, 3) stage-space positions on ``pose``."""
+        return pose.track(self.triangles, self.barycentric)
+
+    def velocity(self, pose_a: "Pose", pose_b: "Pose") -> np.ndarray:
+        """(C, 3) average velocity between two poses, stage units per second."""
+        dt = pose_b.seconds - pose_a.seconds
+        if dt == 0:
+            raise ValueError("the two poses are at the same time")
+        return (self.at(pose_b) - self.at(pose_a)) / dt
+
+    def velocity_at(self, collider: "Collider", clip: str | None, time: float, step: float = 0.05):
+        """(C, 3) velocity at ``time`` by central difference over ``step`` time codes."""
+        a = collider.pose(clip, time - step)
+        b = collider.pose(clip, time + step)
+        return self.velocity(a, b)
+
+
+# -- backends ----------------------------------------------------------------------------------
+
+
+class PartsBackend:
+    """Part spheres first, then exact tests on the triangles of the parts they pass."""
+
+    name = "parts"
+    use_parts = True
+
+    def raycast(self, pose, origins, directions, max_distance):
+        d = pose._data
+        R = len(origins)
+        dist = np.empty(R)
+        tri = np.empty(R, dtype=np.int64)
+        part = np.empty(R, dtype=np.int64)
+        bary = np.empty((R, 3))
+        if R > PARALLEL_RAYS or not self.use_parts:
+            pose._skin_all()
+        if R > PARALLEL_RAYS:
+            kern = K._raycast_parallel
+            if self.use_parts:
+                pose._all_chunks()
+        else:
+            kern = K._raycast
+        kern(origins, directions, max_distance, pose._points, d.triangles, pose.cull, d.faces,
+             d.chunk_offsets, d.part_chunks, pose.chunk_spheres, pose._ready, pose._version,
+             pose._lazy(), self.use_parts, dist, tri, part, bary)
+        if not self.use_parts:
+            part = np.where(tri >= 0, d.face_part[np.maximum(tri, 0)], -1)
+        return pose._ray_hits(origins, directions, dist, tri, part, bary)
+
+    def sphere_contacts(self, pose, center, radius):
+        d = pose._data
+        s = pose._scratch()
+        pose._stamp += 1
+        if not self.use_parts:
+            pose._skin_all()
+        n = K._sphere_contacts(center, radius, pose._points, d.triangles, pose.cull, d.faces,
+                               d.chunk_offsets, d.part_chunks, pose.chunk_spheres, pose._ready,
+                               pose._version, pose._lazy(), self.use_parts, s["mark"], pose._stamp, s["tri"],
+                               s["point"], s["normal"], s["depth"], s["bary"])
+        return SphereContacts(s["tri"][:n].copy(), s["point"][:n].copy(), s["normal"][:n].copy(),
+                              s["depth"][:n].copy(), s["bary"][:n].copy())
+
+
+class BruteForceBackend(PartsBackend):
+    """Every triangle, no culling: the reference the culled backend must always agree with."""
+
+    name = "brute"
+    use_parts = False
+
+
+class TrimeshBackend:
+    """trimesh on the posed mesh (embree when available), rebuilt per query: a baseline."""
+
+    name = "trimesh"
+
+    def _mesh(self, pose):
+        import trimesh
+
+        return trimesh.Trimesh(pose.points.astype(np.float64), pose._data.triangles, process=False)
+
+    def raycast(self, pose, origins, directions, max_distance):
+        m = self._mesh(pose)
+        loc, ray, tri = m.ray.intersects_location(origins, directions, multiple_hits=True)
+        R = len(origins)
+        dist = np.full(R, np.inf)
+        best = np.full(R, -1, dtype=np.int64)
+        if len(ray):
+            dd = np.einsum("ij,ij->i", loc - origins[ray], directions[ray])
+            ok = (dd >= 0) & (dd <= max_distance)
+            for r, t, f in zip(ray[ok], dd[ok], tri[ok]):
+                if t < dist[r]:
+                    dist[r], best[r] = t, f
+        bary = np.zeros((R, 3))
+        h = best >= 0
+        if h.any():
+            import trimesh
+
+            pts = origins[h] + dist[h, None] * directions[h]
+            bary[h] = trimesh.triangles.points_to_barycentric(m.triangles[best[h]], pts)
+        part = np.where(h, pose._data.face_part[np.maximum(best, 0)], -1)
+        return pose._ray_hits(origins, directions, dist, best, part, bary)
+
+    def sphere_contacts(self, pose, center, radius):
+        import trimesh
+
+        m = self._mesh(pose)
+        q = np.repeat(center[None], len(m.faces), 0)
+        cp = trimesh.triangles.closest_point(m.triangles, q)
+        dist = np.linalg.norm(cp - center, axis=1)
+        idx = np.nonzero(dist <= radius)[0]
+        nrm = center - cp[idx]
+        ln = np.linalg.norm(nrm, axis=1, keepdims=True)
+        nrm = np.divide(nrm, ln, out=np.zeros_like(nrm), where=ln > 0)
+        bary = trimesh.triangles.points_to_barycentric(m.triangles[idx], cp[idx]) if len(idx) else np.zeros((0, 3))
+        return SphereContacts(idx.astype(np.int64), cp[idx], nrm, radius - dist[idx], bary)
+
+
+BACKENDS = {b.name: b for b in (PartsBackend(), BruteForceBackend(), TrimeshBackend())}
+
+
+def get_backend(backend):
+    if backend is None or hasattr(backend, "raycast"):
+        return backend
+    try:
+        return BACKENDS[backend]
+    except KeyError:
+        raise ValueError(f"unknown backend {backend!r}; one of {sorted(BACKENDS)}") from None
+
+
+# -- pose --------------------------------------------------------------------------------------
+
+
+def _vec3s(a, name):
+    a = np.asarray(a, dtype=np.float64)
+    if a.ndim == 1 and a.shape[0] == 3:
+        a = a[None]
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{name} must be (R, 3), got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name} must be finite")
+    return np.ascontiguousarray(a)
+
+
+class Pose:
+    """The collider at one clip and time: skinned points, part spheres, queries.
+
+    Posing is lazy when the skin weights allow (``collider.lazy`` and convex weights): :meth:`set`
+    computes the joints, the part spheres and provable culling spheres; a query skins only the
+    parts it reaches, and reading :attr:`points` skins the rest (same numbers either way).
+
+    Attributes
+    ----------
+    points : (V, 3) float32, stage space (preallocated, updated in place)
+    spheres : (P, 4) float64, part sphere centres + radii moved with their joints
+    cull : (P, 4) float64, the spheres used for culling: same centres, radius provably reaching
+        every posed vertex of the part (bounds from the joints' bind-space spheres, or the
+        farthest skinned vertex), so culling never changes an answer
+    skel_transforms : (J, 4, 4) float64, joint skeleton-space transforms
+    clip, time, seconds
+    """
+
+    def __init__(self, collider: "Collider"):
+        d = collider.data
+        self.collider = collider
+        self._data = d
+        V, J, P = len(d.rest_points), len(d.joints), len(d.part_joint)
+        self._points = np.empty((V, 3), dtype=np.float32)
+        self._full = -1  # version at which every vertex was skinned
+        self.spheres = np.empty((P, 4))
+        self.cull = np.empty((P, 4))
+        self.skel_transforms = np.empty((J, 4, 4))
+        self.skinning_transforms = np.empty((J, 4, 4))
+        self.joint_world = np.empty((J, 4, 4))
+        self.local_to_world = np.eye(4)
+        self.chunk_spheres = np.empty((len(d.chunk_offsets) - 1, 4))
+        self._ready = np.zeros(P, dtype=np.int64)  # part p's chunk spheres are valid if == _version
+        self._version = 0
+        self._local = np.empty((J, 4, 4))
+        self._buffers = None
+        self._stamp = 0
+        self.clip = None
+        self.time = 0.0
+
+    @property
+    def seconds(self) -> float:
+        return self.time / self._data.time_codes_per_second
+
+    def set(self, clip: str | None, time: float) -> "Pose":
+        """Re-pose in place (no allocation) at ``clip`` and time code ``time``."""
+        d = self._data
+        c = self.collider._clip(clip)
+        time = float(time)
+        if not np.isfinite(time):
+            raise ValueError(f"time must be finite, got {time}")
+        if d.static_local_to_world is not None:
+            self.local_to_world = d.static_local_to_world
+        else:
+            from pxr import UsdGeom
+
+            prim = d.stage.GetPrimAtPath(d.skeleton_path)
+            self.local_to_world = np.asarray(UsdGeom.Imageable(prim).ComputeLocalToWorldTransform(time))
+        K._joint_transforms(time, c.tt, c.vt, c.tr, c.vr, c.ts, c.vs, c.anim_to_skel, d.rest_local,
+                            d.parents, d.topo_order, d.inv_bind, d.geom_bind, self.local_to_world,
+                            self._local, self.skel_transforms, self.skinning_transforms, self.joint_world)
+        self._version += 1
+        if d.convex and self.collider.lazy:
+            K._part_spheres(d.part_centers, d.part_radii, d.part_joint, self.joint_world,
+                            self._points, d.vert_offsets, d.verts, self.spheres, self.cull, False)
+            K._cull_bounds(self.spheres, d.pj_offsets, d.pj_joint, d.pj_center, d.pj_radius,
+                           self.joint_world, self.cull)
+        else:
+            self._skin_all()
+            K._part_spheres(d.part_centers, d.part_radii, d.part_joint, self.joint_world,
+                            self._points, d.vert_offsets, d.verts, self.spheres, self.cull, True)
+        self.clip = c.name if clip is not None else None
+        self.time = time
+        return self
+
+    # -- queries
+
+    def raycast(self, origins, directions, max_distance=np.inf, backend=None) -> RayHits:
+        """Nearest hit of each ray ``origins + t * directions``, ``0 <= t <= max_distance``.
+
+        origins, directions : (R, 3) (a single (3,) ray is accepted); directions need not be
+        unit (they are normalised; distances are stage units). Both sides of a triangle hit."""
+        o = _vec3s(origins, "origins")
+        dirs = _vec3s(directions, "directions")
+        if o.shape != dirs.shape:
+            raise ValueError(f"origins {o.shape} and directions {dirs.shape} differ in shape")
+        n = np.linalg.norm(dirs, axis=1)
+        if (n == 0).any():
+            raise ValueError("a direction is zero")
+        dirs = dirs / n[:, None]
+        md = float(max_distance)
+        if not md >= 0:
+            raise ValueError(f"max_distance must be >= 0, got {max_distance}")
+        return (get_backend(backend) or self.collider.backend).raycast(self, o, dirs, md)
+
+    def sphere_contacts(self, center, radius, backend=None) -> SphereContacts:
+        """Every triangle whose closest point lies within ``radius`` of ``center`` (3,)."""
+        c = np.ascontiguousarray(np.asarray(center, dtype=np.float64).reshape(-1))
+        if c.shape != (3,) or not np.isfinite(c).all():
+            raise ValueError(f"center must be 3 finite numbers, got {center!r}")
+        r = float(radius)
+        if not (r >= 0 and np.isfinite(r)):
+            raise ValueError(f"radius must be finite and >= 0, got {radius!r}")
+        return (get_backend(backend) or self.collider.backend).sphere_contacts(self, c, r)
+
+    def track(self, triangles, barycentric) -> np.ndarray:
+        """(C, 3) stage positions of surface points (triangle index + barycentric (C, 3|2))."""
+        sp = SurfacePoints(triangles, barycentric)
+        F = len(self._data.triangles)
+        if len(sp) and (sp.triangles.min() < 0 or sp.triangles.max() >= F):
+            raise ValueError(f"triangle index out of range 0..{F - 1}")
+        out = np.empty((len(sp), 3))
+        K._surface_points(self.points, self._data.triangles, sp.triangles, sp.barycentric, out)
+        return out
+
+    def face_normals(self, triangles=None) -> np.ndarray:
+        """(n, 3) unit geometric normals (counter-clockwise = outward) of ``triangles`` (all)."""
+        return self._normals(self.points, triangles)
+
+    def _normals(self, points, triangles):
+        tri = (np.arange(len(self._data.triangles)) if triangles is None
+               else np.ascontiguousarray(np.asarray(triangles, dtype=np.int64).ravel()))
+        out = np.empty((len(tri), 3))
+        K._face_normals(points, self._data.triangles, tri, out)
+        return out
+
+    @property
+    def points(self) -> np.ndarray:
+        """(V, 3) float32 skinned points, stage space."""
+        self._skin_all()
+        return self._points
+
+    # -- helpers
+
+    def _skin_all(self):
+        if self._full != self._version:
+            d = self._data
+            kern = K._skin_lbs if len(d.rest_points) > PARALLEL_SKIN else K._skin_lbs_serial
+            kern(d.rest_points, d.joint_indices, d.joint_weights, self.skinning_transforms,
+                 self.local_to_world, self._points)
+            self._full = self._version
+
+    def _lazy(self):
+        d = self._data
+        return (self._full, d.rest_points, d.joint_indices, d.joint_weights,
+                self.skinning_transforms, self.local_to_world, d.vert_offsets, d.verts)
+
+    def _all_chunks(self):
+        d = self._data
+        K._all_chunk_spheres(self._points, d.triangles, d.faces, d.chunk_offsets, d.part_chunks,
+                             self.chunk_spheres, self._ready, self._version)
+
+    def _scratch(self):
+        if self._buffers is None:
+            F = len(self._data.triangles)
+            self._buffers = dict(mark=np.zeros(F, dtype=np.int64), tri=np.empty(F, dtype=np.int64),
+                                 point=np.empty((F, 3)), normal=np.empty((F, 3)),
+                                 depth=np.empty(F), bary=np.empty((F, 3)))
+        return self._buffers
+
+    def _ray_hits(self, origins, directions, dist, tri, part, bary):
+        point = np.empty(origins.shape)
+        normal = np.empty(origins.shape)
+        K._hit_fill(origins, directions, dist, tri, self._points, self._data.triangles, point, normal)
+        return RayHits(dist, point, normal, tri, bary, part)
+
+
+# -- collider ----------------------------------------------------------------------------------
+
+
+class Collider:
+    """A loaded collider asset (see :func:`load_collider`).
+
+    Attributes
+    ----------
+    data : :class:`runtime.asset.ColliderData` (all arrays)
+    clips : list of clip names, file order
+    triangles : (F, 3) int64
+    backend : query backend (``"parts"`` default, ``"brute"``, ``"trimesh"``), same methods
+    """
+
+    def __init__(self, data: ColliderData, backend="parts", lazy=True):
+        self.data = data
+        self.lazy = lazy
+        self.backend = get_backend(backend)
+        self._clips = {c.name: c for c in data.clips}
+        A0 = np.zeros((1, 0, 3))
+        self._rest = ClipData("", "", np.zeros(1), A0, np.zeros(1), np.zeros((1, 0, 4)),
+                              np.zeros(1), A0, np.zeros(0, dtype=np.int64), np.zeros(0))
+
+    @property
+    def clips(self) -> list:
+        return [c.name for c in self.data.clips]
+
+    @property
+    def triangles(self) -> np.ndarray:
+        return self.data.triangles
+
+    @property
+    def rest_points(self) -> np.ndarray:
+        return self.data.rest_points
+
+    @property
+    def parts(self) -> int:
+        return len(self.data.part_joint)
+
+    @property
+    def up(self) -> np.ndarray:
+        """(3,) the stage's up vector."""
+        return np.array([0.0, 0.0, 1.0]) if self.data.up_axis == "Z" else np.array([0.0, 1.0, 0.0])
+
+    def frame_times(self, clip: str) -> np.ndarray:
+        """(n,) float64 time codes of the clip's samples (its frames)."""
+        return self._clip(clip).times.copy()
+
+    def _clip(self, clip):
+        if clip is None:
+            return self._rest
+        try:
+            return self._clips[clip]
+        except KeyError:
+            raise KeyError(f"no clip {clip!r}; clips are {self.clips}") from None
+
+    def pose(self, clip: str | None, time: float = 0.0, out: Pose | None = None) -> Pose:
+        """The collider at ``clip`` (None: the rest pose) and time code ``time`` (any value:
+        interpolated as UsdSkel does, held outside the clip). ``out`` reuses a pose's buffers."""
+        p = out if out is not None else Pose(self)
+        if p.collider is not self:
+            raise ValueError("out is a pose of another collider")
+        return p.set(clip, time)
+
+    def size(self) -> float:
+        """Diagonal of the rest points' bounding box (the model size)."""
+        p = self.data.rest_points
+        return float(np.linalg.norm(p.max(0) - p.min(0)))
+
+
+def load_collider(path, verify: bool = True, backend="parts") -> Collider:
+    """Read a collider asset. ``verify`` runs the validators' error-severity rules first.
+
+    Raises :class:`ColliderError` (one-line message) on a missing, unreadable or invalid asset."""
+    data = read_collider(path)
+    if verify:
+        _verify(path)
+    return Collider(data, backend=backend)
+
+
+def _verify(path):
+    """Run the validators' rules and raise on any error-severity finding (skipped when the
+    validators package is not importable)."""
+    try:
+        from validators import check_asset
+    except ImportError:
+        return
+    try:
+        report = check_asset(str(path))
+    except Exception as e:
+        raise ColliderError(f"{path}: verification could not run: {' '.join(str(e).split())[:300]}") from None
+    errs = [f for f in report.findings if getattr(f, "severity", "error") == "error"]
+    if errs:
+        listing = "; ".join(f"{f.code} {f.message}" for f in errs[:5])
+        more = f" (+{len(errs) - 5} more)" if len(errs) > 5 else ""
+        raise ColliderError(f"{path}: fails verification: {listing}{more}")

@@ -1,0 +1,5 @@
+"""The runtime's exceptions."""
+
+
+class ColliderError(Exception):
+    """A collider asset cannot be read or fails verification (one-line message)."""
