@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	@set -e; py=$$(tools/find-python 12); echo "using $$py ($$($$py --version))"; \
 	  [ -x $(PY) ] || $$py -m venv $(VENV); \
 	  $(PY) -m pip install -q --upgrade pip; \
-	  $(PY) -m pip install -q -e '.[test,bench]'
+	  $(PY) -m pip install -q -e '.[test,bench,dask]'
 	@touch $(STAMP)
 
 demo: setup

@@ -85,11 +85,11 @@ def bench_scaling(sizes=(50_000, 200_000, 800_000), echo=print):
 
 @click.command("bench")
 @click.option("--quick", is_flag=True, help="Smaller sizes (a smoke run).")
-@click.option("--only", type=click.Choice(["import", "scaling", "validate", "runtime"]), multiple=True,
+@click.option("--only", type=click.Choice(["import", "scaling", "validate", "runtime", "scale"]), multiple=True,
               help="Run only these benchmarks (repeatable).")
 def bench_cmd(quick, only):
     """Run the benchmarks; absolute times are this machine's, ratios are against in-process baselines."""
-    want = set(only) or {"import", "scaling", "validate", "runtime"}
+    want = set(only) or {"import", "scaling", "validate", "runtime", "scale"}
     click.echo(f"colossus bench on {os.cpu_count()} cores (absolute times are this machine's)\n")
     if "import" in want:
         bench_import(*((20_000, 20, 2, 30) if quick else ()), echo=click.echo)
@@ -112,3 +112,11 @@ def bench_cmd(quick, only):
             click.echo(f"runtime benchmark unavailable: {exc}")
         else:
             click.echo(rt_format(rt_run()))
+    if "scale" in want:
+        try:
+            from .batch import format_bench as sc_format, run_bench as sc_run
+        except ImportError as exc:  # pragma: no cover
+            click.echo(f"scale benchmark unavailable: {exc}")
+        else:
+            click.echo()
+            click.echo(sc_format(sc_run(**({"count": 40} if quick else {}))))

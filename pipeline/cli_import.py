@@ -89,9 +89,9 @@ def format_summary(result) -> str:
 
 
 @click.command("import", context_settings={"help_option_names": ["-h", "--help"]})
-@click.argument("src", type=click.Path(dir_okay=True, path_type=str))
+@click.argument("srcs", metavar="SRC...", nargs=-1, required=True, type=click.Path(dir_okay=True, path_type=str))
 @click.option("-o", "--output", "out", required=True, type=click.Path(path_type=str),
-              help="Collider asset to write (.usda, .usdc or .usd).")
+              help="Collider asset to write (.usda, .usdc or .usd); with several inputs, a directory.")
 @click.option("--up-axis", type=click.Choice(["Y", "Z"], case_sensitive=False), default="Y", show_default=True,
               help="Up axis of the output.")
 @click.option("--meters-per-unit", type=float, default=1.0, show_default=True, help="Output units.")
@@ -116,8 +116,13 @@ def format_summary(result) -> str:
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--progress/--no-progress", default=None,
               help="Show a progress bar on stderr (default: for large inputs on a terminal).")
-def import_cmd(src, out, up_axis, meters_per_unit, max_influences, unweighted, parts_mode, parts_threshold,
-               min_part_faces, meshes, fps, source_up_axis, source_meters_per_unit, as_json, progress):
+@click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Several inputs: import in N parallel processes.")
+@click.option("--scheduler", metavar="ADDRESS",
+              help="Several inputs: run on a Dask cluster (tcp://host:8786, or local:N; needs colossus[dask]).")
+def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, parts_mode, parts_threshold,
+               min_part_faces, meshes, fps, source_up_axis, source_meters_per_unit, as_json, progress, jobs,
+               scheduler):
     """Import the Blender export SRC and write the collider asset OUT.
 
     \b
@@ -125,8 +130,14 @@ def import_cmd(src, out, up_axis, meters_per_unit, max_influences, unweighted, p
     Exit status: 0 written; 1 the input is unusable (nothing written); 2 usage.
 
     \b
+    Several inputs (SRC..., directories, globs): -o is a directory and each input becomes
+    DIR/<stem>.usda (<stem>.<ext>.usda where two inputs share a stem); one line per input,
+    exit 1 if any failed, 130 interrupted.
+
+    \b
     Example:
       colossus import samples/creature.glb -o creature.usda
+      colossus import 'exports/*.glb' -o colliders/ --jobs 4
     """
     from .run import ImportSettings, import_asset
 
@@ -137,6 +148,12 @@ def import_cmd(src, out, up_axis, meters_per_unit, max_influences, unweighted, p
         source_up_axis=source_up_axis.upper() if source_up_axis else None,
         source_meters_per_unit=source_meters_per_unit,
     )
+    from .batch import is_glob
+    from .readers import USD_EXTENSIONS
+    one_file_out = out.lower().endswith(USD_EXTENSIONS) and not os.path.isdir(out)
+    if len(srcs) > 1 or ((os.path.isdir(srcs[0]) or is_glob(srcs[0])) and not one_file_out):
+        return _import_many(srcs, out, settings, as_json, progress, jobs, scheduler)
+    src = srcs[0]
     if progress is None:
         try:
             big = os.path.getsize(src) >= LARGE_INPUT_BYTES
@@ -166,3 +183,36 @@ def import_cmd(src, out, up_axis, meters_per_unit, max_influences, unweighted, p
         click.echo(json.dumps(result.summary(), indent=2, default=float))
     else:
         click.echo(format_summary(result))
+
+
+def _import_many(srcs, out, settings, as_json, progress, jobs, scheduler):
+    """``colossus import A B ... -o DIR``: see :mod:`pipeline.batch`."""
+    from .batch import format_import_rows, import_many
+    from .readers import USD_EXTENSIONS
+
+    if os.path.isfile(out) or (not os.path.isdir(out) and out.lower().endswith(USD_EXTENSIONS)):
+        fail(f"-o {out}: with several inputs, -o is the output directory", 2)
+    try:
+        settings.check()
+    except UsageError as exc:
+        fail(str(exc), 2)
+    show = sys.stderr.isatty() if progress is None else progress
+    try:
+        rows, interrupted = import_many(srcs, out, settings, jobs=jobs, scheduler=scheduler, progress=show)
+    except RuntimeError as exc:  # the scheduler cannot be reached, Dask missing
+        fail(str(exc), 2)
+    except OSError as exc:
+        fail(f"-o {out}: {exc.strerror or exc}", 1)
+    if as_json:
+        doc = {"imports": rows}
+        if interrupted:
+            doc["incomplete"] = True
+        click.echo(json.dumps(doc, indent=2, default=float))
+    else:
+        click.echo(format_import_rows(rows, interrupted))
+    for r in rows:
+        if r["ok"] is False:
+            click.echo(f"error: {r['source']}: {r['error']}", err=True)
+    if interrupted:
+        sys.exit(130)
+    sys.exit(0 if all(r["ok"] for r in rows) else 1)

@@ -29,7 +29,7 @@ def _list_rules(ctx, param, value):
 
 @click.command("validate")
 @click.argument("paths", nargs=-1, type=click.Path())
-@click.option("--format", "fmt", type=click.Choice(["text", "json", "junit"]), default="text", show_default=True,
+@click.option("--format", "fmt", type=click.Choice(["text", "json", "junit", "html"]), default="text", show_default=True,
               help="Report format.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True),
               help="Write the report to FILE (atomically) instead of stdout.")
@@ -45,18 +45,26 @@ def _list_rules(ctx, param, value):
               help="Warn when a sphere is this many times the tightest radius.")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Check assets in N parallel processes.")
+@click.option("--scheduler", metavar="ADDRESS",
+              help="Run on a Dask cluster instead (tcp://host:8786, or local:N for N local workers; "
+                   "needs colossus[dask]).")
+@click.option("--split-above", "split_above", metavar="SIZE", default="64M", show_default=True,
+              help="With --jobs > 1 or --scheduler, prove assets at least this large one clip per task "
+                   "(bytes, or K/M/G; 'never').")
 @click.option("--progress/--no-progress", default=None,
               help="Progress bar on stderr (default: when stderr is a terminal).")
 @click.option("-v", "--verbose", is_flag=True, help="Text format: list every finding, not only the worst.")
 @click.option("--list-rules", is_flag=True, expose_value=False, is_eager=True, callback=_list_rules,
               help="Print the rule catalog and exit.")
 def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, subframes, slack_ratio, jobs,
-                 progress, verbose):
-    """Check collider assets: PATHS are files or directories (searched for *.usd, *.usda,
-    *.usdc, *.usdz).  Exit 0 all pass, 1 any error finding, 2 a path unreadable or usage."""
+                 scheduler, split_above, progress, verbose):
+    """Check collider assets: PATHS are files, directories (searched for *.usd, *.usda,
+    *.usdc, *.usdz) or globs ('assets/**/*.usda').  Exit 0 all pass, 1 any error finding,
+    2 a path unreadable or usage, 130 interrupted (the report so far is still written, marked
+    INCOMPLETE)."""
     from .registry import RuleSelector
-    from .report import FORMATS, format_text, write_atomic
-    from .runner import check_paths
+    from .parallel import check_many, render as render_report
+    from .report import write_atomic
 
     if not paths:
         raise click.UsageError("give at least one asset file or directory")
@@ -78,33 +86,46 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
     except KeyError as e:
         raise click.UsageError(f"--severity: unknown rule code {e}")
 
+    split_bytes = _size(split_above)
     show = sys.stderr.isatty() if progress is None else progress
-    bar = None
-    cb = None
-    if show:
-        bar = click.progressbar(length=1, label="validating", file=sys.stderr)
-        bar.__enter__()
-
-        def cb(done, total, path):
-            bar.length = total
-            bar.update(1)
-
     try:
-        reports, missing = check_paths(paths, jobs=jobs, progress=cb, select=sel, ignore=ign, severities=sev,
-                                       max_influences=max_influences, subframes=subframes,
-                                       slack_ratio=slack_ratio)
-    finally:
-        if bar is not None:
-            bar.__exit__(None, None, None)
+        res = check_many(paths, jobs=jobs, scheduler=scheduler, progress=show, split_bytes=split_bytes,
+                         select=sel, ignore=ign, severities=sev, max_influences=max_influences,
+                         subframes=subframes, slack_ratio=slack_ratio)
+    except RuntimeError as e:  # the scheduler cannot be reached, Dask missing
+        click.echo(f"colossus validate: {e}", err=True)
+        sys.exit(2)
+    reports, missing = res.reports, res.missing
     for m in missing:
         click.echo(f"colossus validate: {m}: no such file or directory", err=True)
-    render = FORMATS[fmt]
-    text = format_text(reports, verbose=verbose) if fmt == "text" else render(reports)
+    if res.interrupted:
+        click.echo(f"colossus validate: interrupted; {len(res.unchecked)} asset(s) not checked, "
+                   "the report is INCOMPLETE", err=True)
+        if fmt not in ("text", "json", "junit", "html"):
+            click.echo(f"colossus validate: the {fmt} report does not say it is incomplete", err=True)
+    text = render_report(fmt, reports, verbose=verbose, unchecked=res.unchecked if res.interrupted else None)
     if output:
         write_atomic(output, text)
     else:
         click.echo(text, nl=False)
+    if res.interrupted:
+        sys.exit(130)
     unreadable = bool(missing) or any(f.code == "COL003" for r in reports for f in r.findings)
     if unreadable:
         sys.exit(2)
     sys.exit(0 if all(r.passed for r in reports) else 1)
+
+
+def _size(text):
+    """``--split-above``: bytes with an optional K/M/G suffix (powers of 1024), or 'never'."""
+    t = text.strip().upper().removesuffix("B")
+    if t in ("NEVER", "NONE", "OFF"):
+        return None
+    mult = {"K": 2**10, "M": 2**20, "G": 2**30}.get(t[-1:], 1)
+    try:
+        n = float(t[:-1] if t[-1:] in "KMG" else t)
+    except ValueError:
+        raise click.UsageError(f"--split-above {text!r}: expected a size such as 64M, or 'never'")
+    if n < 0:
+        raise click.UsageError(f"--split-above {text!r}: expected a size >= 0")
+    return int(n * mult)

@@ -117,7 +117,13 @@ def format_junit(reports) -> str:
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(suites, encoding="unicode") + "\n"
 
 
-FORMATS = {"text": format_text, "json": format_json, "junit": format_junit}
+def format_html(reports) -> str:
+    """One self-contained HTML page with pictures (:mod:`validators.htmlreport`)."""
+    from .htmlreport import format_html as _html
+    return _html(reports)
+
+
+FORMATS = {"text": format_text, "json": format_json, "junit": format_junit, "html": format_html}
 
 
 def write_atomic(path: str, text: str) -> None:

@@ -21,6 +21,7 @@ DEFAULT_OPTIONS = {
     "subframes": 0,
     "slack_ratio": tol.SLACK_RATIO,
     "chunk_frames": None,
+    "clip_proofs": None,
 }
 
 
@@ -28,7 +29,9 @@ class Context:
     """Options shared by the rules of one asset, and the cached frame proof.
 
     Attributes: ``max_influences`` (int), ``subframes`` (int), ``slack_ratio`` (float),
-    ``chunk_frames`` (int or None: automatic).
+    ``chunk_frames`` (int or None: automatic), ``clip_proofs`` (proofs of the asset's clips
+    already run elsewhere, e.g. one per clip on other workers, merged instead of proving again;
+    see :mod:`validators.parallel`).
     """
 
     def __init__(self, asset, **options):
@@ -45,12 +48,16 @@ class Context:
         self.subframes = int(opts["subframes"])
         self.slack_ratio = float(opts["slack_ratio"])
         self.chunk_frames = opts["chunk_frames"]
+        self.clip_proofs = opts["clip_proofs"]
         self._proof = None
 
     def proof(self):
         if self._proof is None:
-            from .frameproof import prove
-            self._proof = prove(self.asset, subframes=self.subframes, chunk_frames=self.chunk_frames)
+            from .frameproof import merge_proofs, prove
+            if self.clip_proofs is not None:
+                self._proof = merge_proofs(self.asset, self.clip_proofs, subframes=self.subframes)
+            else:
+                self._proof = prove(self.asset, subframes=self.subframes, chunk_frames=self.chunk_frames)
         return self._proof
 
 
@@ -195,6 +202,10 @@ def _worker(args):
 
 def check_paths(paths, jobs=1, progress=None, **kw):
     """Check every asset under ``paths`` (see :func:`discover`), in ``jobs`` processes.
+
+    (``colossus validate`` uses :func:`validators.parallel.check_many` instead: globs, Dask,
+    per-clip splitting of large assets, one isolated retry, Ctrl-C; this stays as the simple
+    library call.)
 
     ``progress``: optional callable ``(done, total, path)``.  A worker process that dies on an
     asset (a crash inside usd-core) yields a ``COL001`` report for that asset; the others go on.

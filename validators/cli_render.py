@@ -1,0 +1,68 @@
+"""``colossus render PATH -o FILE.png|.gif``: a picture of the collider and its part spheres (thin
+layer over :mod:`validators.render`).
+
+Exit status: 0 written; 2 the asset cannot be read or drawn, an unknown clip, or usage (one
+line on stderr, no traceback); 1 the picture could not be made on this machine (no OpenGL
+context: VTK's own message).
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+SUFFIXES = (".png", ".gif")
+
+
+@click.command("render")
+@click.argument("path", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, writable=True),
+              help="FILE.png (one pose) or FILE.gif (a whole clip).")
+@click.option("--clip", help="Clip to draw (default: the bind pose for .png, the first clip for .gif).")
+@click.option("--time", "time_", type=float,
+              help=".png: time code within --clip (default its first frame; implies the first clip).")
+@click.option("--size", default=None, metavar="WxH",
+              help="Image size in pixels [800x600 for .png, 480x360 for .gif].")
+@click.option("--max-frames", type=click.IntRange(min=1, max=1000), default=60, show_default=True,
+              help=".gif: frames are subsampled evenly to at most this many.")
+def render_cmd(path, output, clip, time_, size, max_frames):
+    """Render the collision mesh of PATH with every part's sphere drawn translucent in the part's
+    colour.  A part whose sphere does not hold its vertices on the pose drawn is red, and its
+    offending vertices are marked in yellow."""
+    from .render import RenderError, parse_size, render_gif, render_png
+    from .summary import AssetError, open_asset
+
+    suffix = output[output.rfind("."):].lower() if "." in output else ""
+    if suffix not in SUFFIXES:
+        raise click.BadParameter(f"expected a .png or .gif file name, got {output!r}", param_hint="'-o'")
+    if suffix == ".gif" and time_ is not None:
+        raise click.BadParameter("a .gif draws the whole clip; --time is for .png", param_hint="'--time'")
+    try:
+        wh = parse_size(size or ("800x600" if suffix == ".png" else "480x360"))
+    except ValueError as e:
+        raise click.BadParameter(str(e), param_hint="'--size'")
+    try:
+        asset = open_asset(path)
+        if suffix == ".png":
+            if clip is None and time_ is not None:
+                if not asset.clips:
+                    raise RenderError(f"{path}: has no clips (--time needs one)")
+                clip = asset.clips[0].name
+            pose = render_png(asset, output, clip=clip, time=time_, size=wh)
+            what = pose.label
+            failing = int(pose.failing.sum())
+        else:
+            ps = render_gif(asset, output, clip=clip, size=wh, max_frames=max_frames)
+            what = f"{ps[0].clip}, {len(ps)} frames"
+            failing = sum(bool(p.failing.any()) for p in ps)
+    except (AssetError, RenderError) as e:
+        click.echo(f"colossus render: {e}", err=True)
+        sys.exit(2)
+    except Exception as e:  # the renderer itself (no OpenGL context, ...)
+        from .summary import one_line
+        click.echo(f"colossus render: could not draw on this machine: {one_line(e)}", err=True)
+        sys.exit(1)
+    unit = "frame" if suffix == ".gif" else "part"
+    note = f" ({failing} {unit}{'s' if failing > 1 else ''} with a failing sphere)" if failing else ""
+    click.echo(f"colossus render {path} -> {output} [{what}]{note}")

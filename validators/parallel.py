@@ -1,0 +1,237 @@
+"""``colossus validate`` on many assets: ``--jobs N`` processes or ``--scheduler`` (Dask), with
+very large assets split into one frame-proof task per clip.
+
+The distribution machinery (backends, retries, Ctrl-C, progress) is :mod:`pipeline.batch`;
+this module holds the validator's work units and the merge:
+
+================= ===========================================================================
+unit              does (in a worker)
+================= ===========================================================================
+``unit_check``    every rule on one asset (``check_asset``): the usual unit
+``unit_plan``     for an asset of at least ``split_bytes``: the clip names to split by (or
+                  None: the asset is not provable, or has fewer than two clips)
+``unit_clip``     the frame proof of one clip of that asset
+``unit_finish``   every rule on that asset, the frame proof merged from the clip proofs
+                  (:func:`validators.frameproof.merge_proofs`: identical to proving it whole)
+================= ===========================================================================
+
+Reports come back in any order and are put in input order (directories expanded sorted), so
+every format (text, JSON, JUnit) is the same as a ``--jobs 1`` run, timing fields aside
+(:func:`comparable`).  A unit whose worker dies is retried once, alone; if it dies again the
+asset gets a ``COL001`` finding ("checking the asset crashed") and every other asset keeps its
+result.  Ctrl-C returns what finished; :func:`render` marks such a report incomplete.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from xml.etree import ElementTree as ET
+
+from pipeline.batch import Engine, Progress, Task, crash_hook, expand_inputs, make_backend
+
+from .runner import USD_SUFFIXES, _crash_report, check_asset
+
+#: Assets at least this large (bytes on disk) are split by clip across workers.
+SPLIT_BYTES = 64 * 2**20
+
+#: Rules that read the frame proof: splitting only pays when one of them is selected.
+PROOF_RULES = ("COL403", "COL404")
+
+
+# ------------------------------------------------------------------------------ work units
+def unit_check(path, kw):
+    crash_hook(path)
+    return check_asset(path, **kw)
+
+
+def unit_plan(path, kw):
+    crash_hook(path)
+    from .asset import LoadedAsset, open_stage
+    try:
+        asset = LoadedAsset(open_stage(path), path)
+        if not asset.ready("proof")[0]:
+            return None
+        names = [c.name for c in asset.clips]
+    except Exception:
+        return None  # unit_check reports it
+    if len(names) < 2 or len(set(names)) != len(names):
+        return None
+    return names
+
+
+def unit_clip(path, clip, kw):
+    crash_hook(path)
+    from .asset import LoadedAsset, open_stage
+    from .frameproof import prove
+    asset = LoadedAsset(open_stage(path), path)
+    return prove(asset, subframes=kw.get("subframes", 0), chunk_frames=kw.get("chunk_frames"), clips=[clip])
+
+
+def unit_finish(path, kw, proofs):
+    crash_hook(path)
+    return check_asset(path, clip_proofs=proofs, **kw)
+
+
+# ------------------------------------------------------------------------------ driver
+@dataclass
+class BatchResult:
+    """``reports``: one per checked asset, input order (missing paths last, as ``COL003``);
+    ``missing``: paths that do not exist (or globs matching nothing); ``interrupted``: Ctrl-C
+    stopped the run; ``unchecked``: assets not checked because of it; ``retried``: units rerun
+    after their worker died; ``split``: assets whose frame proof ran one clip per task."""
+
+    reports: list
+    missing: list
+    interrupted: bool = False
+    unchecked: list = field(default_factory=list)
+    retried: int = 0
+    split: list = field(default_factory=list)
+
+
+def _should_split(kw) -> bool:
+    from .registry import RuleSelector
+    sel = RuleSelector(kw.get("select"), kw.get("ignore"))
+    return any(sel.enabled(c) for c in PROOF_RULES)
+
+
+def check_many(paths, jobs=1, scheduler=None, progress=False, split_bytes=SPLIT_BYTES, **kw) -> BatchResult:
+    """Check every asset under ``paths`` (files, directories, globs).
+
+    ``jobs``: local processes (1: in this process); ``scheduler``: a Dask scheduler address (or
+    ``local:N``), instead of ``jobs``; ``split_bytes``: assets at least this large have their
+    frame proof split by clip (``None``: never; only with ``jobs > 1`` or a scheduler);
+    ``kw``: :func:`validators.runner.check_asset` arguments.
+    """
+    assets, missing = expand_inputs(paths, USD_SUFFIXES)
+    backend = make_backend(jobs, scheduler)
+    parallel = backend.workers > 1 or scheduler is not None
+    split = parallel and split_bytes is not None and _should_split(kw)
+    reports = [None] * len(assets)
+    split_paths = []
+    bar = Progress(len(assets), "validating", progress)
+
+    def finish(i, rep):
+        reports[i] = rep
+        bar.advance(not rep.passed)
+
+    def lost(i):
+        def f(e):
+            finish(i, _crash_report(assets[i], e, kw))
+        return f
+
+    def check_task(i):
+        return Task(unit_check, (assets[i], kw), lambda rep: finish(i, rep), lost(i), lost(i))
+
+    def split_task(i):
+        path = assets[i]
+
+        def planned(names):
+            if not names:
+                return [check_task(i)]
+            split_paths.append(path)
+            proofs = {}
+            state = {"given_up": False}  # a clip failed: no unit_finish for this asset
+
+            def got(name):
+                def f(proof):
+                    proofs[name] = proof
+                    if len(proofs) == len(names) and not state["given_up"]:
+                        return [Task(unit_finish, (path, kw, [proofs[n] for n in names]),
+                                     lambda rep: finish(i, rep), lost(i), lost(i))]
+                    return []
+                return f
+
+            def clip_error(e):  # the proof raised: check the asset whole, as --jobs 1 does (COL002)
+                if not state["given_up"]:
+                    state["given_up"] = True
+                    return [check_task(i)]
+
+            def clip_lost(e):  # its worker died twice: one COL001 for the asset
+                if not state["given_up"]:
+                    state["given_up"] = True
+                    lost(i)(e)
+            return [Task(unit_clip, (path, n, kw), got(n), clip_error, clip_lost) for n in names]
+        return Task(unit_plan, (path, kw), planned, lambda e: [check_task(i)], lost(i))
+
+    def size(i):
+        try:
+            return os.path.getsize(assets[i])
+        except OSError:
+            return 0
+
+    sizes = [size(i) for i in range(len(assets))]
+    order = sorted(range(len(assets)), key=lambda i: -sizes[i]) if parallel else range(len(assets))
+    tasks = [split_task(i) if split and sizes[i] >= split_bytes else check_task(i) for i in order]
+    engine = Engine(backend)
+    try:
+        engine.run(tasks)
+    finally:
+        bar.close()
+    done = [r for r in reports if r is not None]
+    unchecked = [a for a, r in zip(assets, reports) if r is None]
+    done += [check_asset(m, **kw) for m in missing]
+    return BatchResult(done, missing, engine.interrupted, unchecked, engine.retried,
+                       sorted(split_paths, key=assets.index))
+
+
+# ------------------------------------------------------------------------------ reports
+def render(fmt, reports, verbose=False, unchecked=None) -> str:
+    """The report in ``fmt`` (``validators.report.FORMATS``); with ``unchecked`` (a list,
+    possibly empty, given when the run was interrupted) marked INCOMPLETE: text gets a last
+    block, JSON gets ``"incomplete": true`` and ``"not_checked": [paths]``, JUnit gets
+    ``incomplete="true"`` on ``<testsuites>`` and a ``not checked (interrupted)`` suite with a
+    skipped case per path, HTML gets a banner at the top of the page."""
+    from .report import FORMATS, format_text
+    text = format_text(reports, verbose=verbose) if fmt == "text" else FORMATS[fmt](reports)
+    if unchecked is None:
+        return text
+    if fmt == "text":
+        lines = [f"INCOMPLETE: interrupted; {len(unchecked)} asset(s) not checked"]
+        lines += [f"  not checked: {p}" for p in unchecked]
+        return text + "\n".join(lines) + "\n"
+    if fmt == "json":
+        data = json.loads(text)
+        data["incomplete"] = True
+        data["not_checked"] = list(unchecked)
+        return json.dumps(data, indent=2) + "\n"
+    if fmt == "junit":
+        root = ET.fromstring(text.split("\n", 1)[1])
+        root.set("incomplete", "true")
+        suite = ET.SubElement(root, "testsuite", name="not checked (interrupted)", tests=str(len(unchecked)),
+                              failures="0", errors="0", skipped=str(len(unchecked)), time="0")
+        for p in unchecked:
+            case = ET.SubElement(suite, "testcase", classname=p, name="not checked", time="0")
+            ET.SubElement(case, "skipped", message="the run was interrupted before this asset was checked")
+        root.set("tests", str(int(root.get("tests", 0)) + len(unchecked)))
+        root.set("skipped", str(int(root.get("skipped", 0)) + len(unchecked)))
+        ET.indent(root)
+        return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    if fmt == "html" and "<body" in text:
+        import html
+        at = text.index(">", text.index("<body")) + 1
+        items = "".join(f"<li>{html.escape(p)}</li>" for p in unchecked)
+        banner = (f'<div class="incomplete" style="border:2px solid #c00;padding:.5em;margin:.5em 0">'
+                  f"<strong>INCOMPLETE</strong>: the run was interrupted; {len(unchecked)} asset(s) not checked"
+                  f"<ul>{items}</ul></div>")
+        return text[:at] + banner + text[at:]
+    return text  # another format: the caller says it on stderr
+
+
+TIMING_KEYS = ("seconds", "load_seconds")
+
+
+def comparable(reports) -> list:
+    """Reports as JSON-able dicts without their timing fields (what makes two runs differ)."""
+    out = []
+    for r in reports:
+        d = json.loads(json.dumps(r.to_dict(), default=lambda o: o.item() if hasattr(o, "item") else str(o)))
+        for k in TIMING_KEYS:
+            d["stats"].pop(k, None)
+        d["stats"].get("frameproof", {}).pop("seconds", None)
+        out.append(d)
+    return out
+
+
+__all__ = ["check_many", "render", "comparable", "BatchResult", "SPLIT_BYTES"]

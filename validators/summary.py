@@ -1,0 +1,195 @@
+"""A readable summary of one collider asset (``colossus inspect``).
+
+``summarize(asset) -> dict`` gathers what a person wants to know first (stage metadata, counts,
+the joint tree, clips, parts, provenance) from a :class:`validators.asset.LoadedAsset`;
+``format_summary(dict) -> str`` lays it out as text.  A malformed piece of the asset shows as
+``None`` / missing rather than raising: the rules of ``colossus validate`` say what is wrong.
+
+``open_asset(path)`` is the one way the picture and summary commands read an asset: it raises
+:class:`AssetError` with a one-line reason when the file is missing or usd-core cannot read it.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+
+import numpy as np
+from pxr import UsdGeom
+
+from .asset import LoadedAsset, open_stage
+
+
+class AssetError(Exception):
+    """The asset cannot be read (missing file, not USD, usd-core error).  ``str()`` is one line."""
+
+
+def one_line(e: BaseException) -> str:
+    """A one-line reason from an exception (usd-core's ``Error in 'func' at line ... : 'why'``
+    reduced to ``why``)."""
+    text = " ".join(str(e).split())
+    m = re.search(r"file \S+ : '(.+?)'(?: Error in|$)", text)
+    if m:
+        text = m.group(1)
+    return text[:300] + ("..." if len(text) > 300 else "") or type(e).__name__
+
+
+def open_asset(path) -> LoadedAsset:
+    """Read ``path`` into a :class:`~validators.asset.LoadedAsset`.
+
+    Raises
+    ------
+    AssetError
+        The file does not exist, is not readable, or usd-core cannot open it.
+    """
+    path = os.fspath(path)
+    if not os.path.isfile(path) or not os.access(path, os.R_OK):
+        raise AssetError(f"{path}: no such readable file")
+    try:
+        return LoadedAsset(open_stage(path), path)
+    except Exception as e:  # usd-core raises Tf.ErrorException and friends
+        raise AssetError(f"{path}: usd-core cannot read it: {one_line(e)}") from None
+
+
+def _plain(v):
+    """usd-core / numpy values -> JSON-able Python values."""
+    if isinstance(v, dict):
+        return {str(k): _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, (str, bool, int, float)) or v is None:
+        return v
+    try:
+        return v.item()
+    except AttributeError:
+        return str(v)
+
+
+def summarize(asset: LoadedAsset) -> dict:
+    """Everything ``colossus inspect`` prints, as plain data.
+
+    Returns
+    -------
+    dict with keys ``path``, ``stage`` (``upAxis``, ``metersPerUnit``, ``timeCodesPerSecond``,
+    ``defaultPrim``), ``prims`` (root, skeleton, mesh paths), ``counts`` (vertices, triangles,
+    faces, joints, parts, clips, frames, influences: elementSize / nonzero / max_per_vertex /
+    mean_per_vertex), ``joints`` (``[{"name", "path", "parent", "depth"}]``, parents first as
+    stored), ``clips`` (``[{"name", "frames", "start", "end", "seconds"}]``), ``parts``
+    (``[{"index", "joint", "faces", "radius"}]``) and ``provenance`` (the mesh's
+    ``customData["colossus"]``, or ``{}``).
+    """
+    stage = asset.stage
+    tcps = float(stage.GetTimeCodesPerSecond())
+    dp = stage.GetDefaultPrim()
+    out = {
+        "path": asset.path,
+        "stage": {
+            "upAxis": str(UsdGeom.GetStageUpAxis(stage)),
+            "metersPerUnit": float(UsdGeom.GetStageMetersPerUnit(stage)),
+            "timeCodesPerSecond": tcps,
+            "defaultPrim": str(dp.GetPath()) if dp else None,
+        },
+        "prims": {
+            "root": str(asset.root.GetPath()) if asset.root is not None else None,
+            "skeleton": str(asset.skeleton.GetPath()) if asset.skeleton is not None else None,
+            "mesh": str(asset.mesh.GetPath()) if asset.mesh is not None else None,
+        },
+    }
+    infl = None
+    if asset.jw is not None:
+        nz = (asset.jw != 0).sum(axis=1)
+        infl = {"elementSize": int(asset.k), "nonzero": int(nz.sum()),
+                "max_per_vertex": int(nz.max()) if len(nz) else 0,
+                "mean_per_vertex": round(float(nz.mean()), 3) if len(nz) else 0.0}
+    P = len(asset.part_joints) if asset.part_joints is not None else None
+    out["counts"] = {
+        "vertices": asset.n if asset.points is not None else None,
+        "triangles": len(asset.tris) if asset.tris is not None else None,
+        "faces": len(asset.face_counts) if asset.face_counts is not None else None,
+        "joints": len(asset.joints) if asset.joints is not None else None,
+        "parts": P,
+        "clips": len(asset.clips),
+        "frames": int(sum(len(c.times) for c in asset.clips)),
+        "influences": infl,
+    }
+    joints = []
+    if asset.joints is not None:
+        parents = asset.parents if asset.parents is not None else np.full(len(asset.joints), -1)
+        depth = {}
+        for i, j in enumerate(asset.joints):
+            p = int(parents[i]) if i < len(parents) else -1
+            depth[i] = depth.get(p, -1) + 1 if p >= 0 else 0
+            joints.append({"name": j.rsplit("/", 1)[-1], "path": j, "parent": p, "depth": depth[i]})
+    out["joints"] = joints
+    out["clips"] = [{
+        "name": c.name,
+        "frames": len(c.times),
+        "start": float(c.times[0]) if len(c.times) else None,
+        "end": float(c.times[-1]) if len(c.times) else None,
+        "seconds": round(float(c.times[-1] - c.times[0]) / tcps, 4) if len(c.times) and tcps > 0 else None,
+    } for c in asset.clips]
+    parts = []
+    if P is not None and asset.part_offsets is not None and asset.part_radii is not None:
+        faces = np.diff(asset.part_offsets)
+        for p in range(P):
+            parts.append({"index": p, "joint": asset.part_joints[p],
+                          "faces": int(faces[p]) if p < len(faces) else None,
+                          "radius": float(asset.part_radii[p]) if p < len(asset.part_radii) else None})
+    out["parts"] = parts
+    prov = {}
+    if asset.mesh is not None:
+        prov = _plain(dict(asset.mesh.GetCustomData().get("colossus", {}) or {}))
+    out["provenance"] = prov
+    return out
+
+
+def _fmt(v, spec="g"):
+    return "-" if v is None else format(v, spec)
+
+
+def format_summary(s: dict) -> str:
+    """The text ``colossus inspect`` prints for a :func:`summarize` dict."""
+    st, c = s["stage"], s["counts"]
+    lines = [s["path"],
+             f"  stage     upAxis {st['upAxis']}, metersPerUnit {st['metersPerUnit']:g}, "
+             f"timeCodesPerSecond {st['timeCodesPerSecond']:g}, defaultPrim {st['defaultPrim'] or '-'}",
+             f"  prims     root {s['prims']['root'] or '-'}, skeleton {s['prims']['skeleton'] or '-'}, "
+             f"mesh {s['prims']['mesh'] or '-'}"]
+    infl = c["influences"]
+    itext = ("-" if infl is None else
+             f"{infl['nonzero']} (elementSize {infl['elementSize']}, max {infl['max_per_vertex']}, "
+             f"mean {infl['mean_per_vertex']:g} per vertex)")
+    lines.append(f"  counts    {_fmt(c['vertices'])} vertices, {_fmt(c['triangles'])} triangles, "
+                 f"{_fmt(c['joints'])} joints, {_fmt(c['parts'])} parts, {c['clips']} clips "
+                 f"({c['frames']} frames), influences {itext}")
+    if s["provenance"]:
+        p = s["provenance"]
+        lines.append("")
+        lines.append("provenance")
+        for key in ("source", "sourceSha256", "importer", "reader", "sourceFrame"):
+            if key in p:
+                lines.append(f"  {key:<13} {p[key]}")
+        settings = p.get("settings") or {}
+        if settings:
+            lines.append("  settings      " + ", ".join(f"{k}={v!s}" for k, v in sorted(settings.items())
+                                                      if v not in ("", None)))
+    if s["joints"]:
+        lines.append("")
+        lines.append(f"joints ({len(s['joints'])})")
+        for i, j in enumerate(s["joints"]):
+            lines.append(f"  {i:>3} {'  ' * j['depth']}{j['name']}")
+    lines.append("")
+    lines.append(f"clips ({len(s['clips'])})")
+    if not s["clips"]:
+        lines.append("  (none)")
+    for cl in s["clips"]:
+        lines.append(f"  {cl['name']:<20} {cl['frames']:>5} frames  {_fmt(cl['seconds'], '.3f'):>8} s  "
+                     f"time codes {_fmt(cl['start'])}..{_fmt(cl['end'])}")
+    lines.append("")
+    lines.append(f"parts ({len(s['parts'])})")
+    if s["parts"]:
+        lines.append(f"  {'part':>4} {'joint':<24} {'faces':>6} {'radius':>10}")
+    for p in s["parts"]:
+        name = p["joint"].rsplit("/", 1)[-1]
+        lines.append(f"  {p['index']:>4} {name:<24} {_fmt(p['faces'], 'd'):>6} {_fmt(p['radius'], '.4g'):>10}")
+    return "\n".join(lines) + "\n"
