@@ -20,6 +20,8 @@ demo: setup
 	@mkdir -p $(OUT)
 	$(VENV)/bin/colossus import samples/creature.glb -o $(OUT)/creature.usda
 	$(VENV)/bin/colossus validate $(OUT)/creature.usda
+	$(VENV)/bin/colossus render $(OUT)/creature.usda -o $(OUT)/creature.png --clip walk --time 12
+	$(VENV)/bin/colossus play $(OUT)/creature.usda --clip walk -o $(OUT)/play.gif
 
 test: setup
 	$(PY) -m pytest -q
