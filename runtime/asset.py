@@ -356,8 +356,13 @@ def _read(path) -> ColliderData:
     if ji.size != V * k or jw.size != V * k:
         raise ColliderError(f"{mesh.GetPath()}: {V} points x {k} influences expected, "
                             f"got {ji.size} joint indices and {jw.size} weights")
-    ji = np.ascontiguousarray(ji.reshape(V, k))
-    jw = np.ascontiguousarray(jw.reshape(V, k))
+    ji = ji.reshape(V, k)
+    jw = jw.reshape(V, k)
+    # strongest first (the contract's order; enforced here because the skinning kernel stops at
+    # a vertex's first zero weight)
+    order = np.argsort(-jw, axis=1, kind="stable")
+    ji = np.ascontiguousarray(np.take_along_axis(ji, order, 1))
+    jw = np.ascontiguousarray(np.take_along_axis(jw, order, 1))
     mesh_joints = binding.GetJointsAttr().Get() if binding.GetJointsAttr() else None
     if mesh_joints:  # skel:joints on the mesh: indices refer to that ordering
         remap = np.array([joint_index.get(str(j), -1) for j in mesh_joints], dtype=np.int32)

@@ -23,7 +23,7 @@ from .errors import ColliderError
 #: Above this many rays the parallel ray kernel is used.
 PARALLEL_RAYS = 256
 #: Above this many vertices skinning runs on every core.
-PARALLEL_SKIN = 50_000
+PARALLEL_SKIN = 8_000
 
 
 # -- results -----------------------------------------------------------------------------------
@@ -279,6 +279,7 @@ class Pose:
         self.cull = np.empty((P, 4))
         self.skel_transforms = np.empty((J, 4, 4))
         self.skinning_transforms = np.empty((J, 4, 4))
+        self._skin_world = np.empty((J, 12))  # skinning_transforms @ local_to_world, flattened (kernels._fold)
         self.joint_world = np.empty((J, 4, 4))
         self.local_to_world = np.eye(4)
         self.chunk_spheres = np.empty((len(d.chunk_offsets) - 1, 4))
@@ -311,6 +312,7 @@ class Pose:
         K._joint_transforms(time, c.tt, c.vt, c.tr, c.vr, c.ts, c.vs, c.anim_to_skel, d.rest_local,
                             d.parents, d.topo_order, d.inv_bind, d.geom_bind, self.local_to_world,
                             self._local, self.skel_transforms, self.skinning_transforms, self.joint_world)
+        K._fold(self.skinning_transforms, self.local_to_world, self._skin_world)
         self._version += 1
         if d.convex and self.collider.lazy:
             K._part_spheres(d.part_centers, d.part_radii, d.part_joint, self.joint_world,
@@ -388,14 +390,13 @@ class Pose:
         if self._full != self._version:
             d = self._data
             kern = K._skin_lbs if len(d.rest_points) > PARALLEL_SKIN else K._skin_lbs_serial
-            kern(d.rest_points, d.joint_indices, d.joint_weights, self.skinning_transforms,
-                 self.local_to_world, self._points)
+            kern(d.rest_points, d.joint_indices, d.joint_weights, self._skin_world, self._points)
             self._full = self._version
 
     def _lazy(self):
         d = self._data
         return (self._full, d.rest_points, d.joint_indices, d.joint_weights,
-                self.skinning_transforms, self.local_to_world, d.vert_offsets, d.verts)
+                self._skin_world, d.vert_offsets, d.verts)
 
     def _all_chunks(self):
         d = self._data

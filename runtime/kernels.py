@@ -142,8 +142,26 @@ def _mul44(a, b, out):
 # -- skinning ----------------------------------------------------------------------------------
 
 
+@njit(cache=True)
+def _fold(skin, local_to_world, out):
+    """Skinning transforms straight into stage space, flattened for the skinning loop.
+
+    skin (J, 4, 4) row-vector skinning transforms, local_to_world (4, 4);
+    out (J, 12): the first three columns of ``skin[j] @ local_to_world`` stored row by row of
+    the column-vector matrix, so ``x' = out[j, 0:4] . (x, y, z, 1)`` and so on."""
+    for j in range(skin.shape[0]):
+        for c in range(3):
+            for r in range(4):
+                acc = 0.0
+                for t in range(4):
+                    acc += skin[j, r, t] * local_to_world[t, c]
+                out[j, 4 * c + r] = acc
+
+
 @njit(cache=True, inline="always")
-def _skin_vertex(v, rest, joint_indices, joint_weights, skin, L, out):
+def _skin_vertex(v, rest, joint_indices, joint_weights, m, out):
+    """Vertex ``v`` skinned by the flattened stage-space transforms ``m`` (J, 12) of
+    :func:`_fold` (contiguous rows: one cache line or two per influence)."""
     px = np.float64(rest[v, 0])
     py = np.float64(rest[v, 1])
     pz = np.float64(rest[v, 2])
@@ -153,32 +171,32 @@ def _skin_vertex(v, rest, joint_indices, joint_weights, skin, L, out):
     for i in range(joint_indices.shape[1]):
         w = np.float64(joint_weights[v, i])
         if w == 0.0:
-            continue
+            break  # weights are sorted strongest first at load: the rest are padding
         j = joint_indices[v, i]  # no row views in hot loops: they cost refcounting
-        ax += w * (px * skin[j, 0, 0] + py * skin[j, 1, 0] + pz * skin[j, 2, 0] + skin[j, 3, 0])
-        ay += w * (px * skin[j, 0, 1] + py * skin[j, 1, 1] + pz * skin[j, 2, 1] + skin[j, 3, 1])
-        az += w * (px * skin[j, 0, 2] + py * skin[j, 1, 2] + pz * skin[j, 2, 2] + skin[j, 3, 2])
-    out[v, 0] = ax * L[0, 0] + ay * L[1, 0] + az * L[2, 0] + L[3, 0]
-    out[v, 1] = ax * L[0, 1] + ay * L[1, 1] + az * L[2, 1] + L[3, 1]
-    out[v, 2] = ax * L[0, 2] + ay * L[1, 2] + az * L[2, 2] + L[3, 2]
+        ax += w * (m[j, 0] * px + m[j, 1] * py + m[j, 2] * pz + m[j, 3])
+        ay += w * (m[j, 4] * px + m[j, 5] * py + m[j, 6] * pz + m[j, 7])
+        az += w * (m[j, 8] * px + m[j, 9] * py + m[j, 10] * pz + m[j, 11])
+    out[v, 0] = ax
+    out[v, 1] = ay
+    out[v, 2] = az
 
 
-@njit(cache=True, parallel=True)
-def _skin_lbs(rest, joint_indices, joint_weights, skin, local_to_world, out):
-    """Linear-blend skinning (UsdSkelSkinPointsLBS) then the skeleton's local-to-world.
+@njit(cache=True, parallel=True, fastmath=True)
+def _skin_lbs(rest, joint_indices, joint_weights, skin, out):
+    """Linear-blend skinning (UsdSkelSkinPointsLBS) into stage space.
 
     rest (V, 3) float32, joint_indices (V, k) int32 (valid, checked at load), joint_weights
-    (V, k) float32, skin (J, 4, 4) float64 skinning transforms, local_to_world (4, 4),
+    (V, k) float32, skin (J, 12) float64 stage-space skinning transforms from :func:`_fold`,
     out (V, 3) float32."""
     for v in prange(rest.shape[0]):
-        _skin_vertex(v, rest, joint_indices, joint_weights, skin, local_to_world, out)
+        _skin_vertex(v, rest, joint_indices, joint_weights, skin, out)
 
 
-@njit(cache=True)
-def _skin_lbs_serial(rest, joint_indices, joint_weights, skin, local_to_world, out):
+@njit(cache=True, fastmath=True)
+def _skin_lbs_serial(rest, joint_indices, joint_weights, skin, out):
     """:func:`_skin_lbs` on one thread (small meshes: no thread-pool wake-up)."""
     for v in range(rest.shape[0]):
-        _skin_vertex(v, rest, joint_indices, joint_weights, skin, local_to_world, out)
+        _skin_vertex(v, rest, joint_indices, joint_weights, skin, out)
 
 
 @njit(cache=True)
@@ -209,14 +227,14 @@ def _cull_bounds(spheres, pj_offsets, pj_joint, pj_center, pj_radius, world, cul
 
 
 @njit(cache=True)
-def _prepare_part(p, skinned, rest, joint_indices, joint_weights, skin, local_to_world,
+def _prepare_part(p, skinned, rest, joint_indices, joint_weights, skin,
                   vert_offsets, verts, points, triangles, faces, chunk_offsets, part_chunks,
                   chunk_sph):
     """Make part ``p`` queryable at this pose: skin its vertices (unless ``skinned``), then
     compute its chunk spheres."""
     if not skinned:
         for i in range(vert_offsets[p], vert_offsets[p + 1]):
-            _skin_vertex(verts[i], rest, joint_indices, joint_weights, skin, local_to_world, points)
+            _skin_vertex(verts[i], rest, joint_indices, joint_weights, skin, points)
     _chunk_spheres(p, points, triangles, faces, chunk_offsets, part_chunks, chunk_sph)
 
 
@@ -369,8 +387,8 @@ def _ray_one(r, origins, directions, max_distance, points, triangles, cull, face
             if not _ray_enters(ox, oy, oz, dx, dy, dz, cull[p, 0], cull[p, 1], cull[p, 2], cull[p, 3], best):
                 continue
             if ready[p] != version:
-                _prepare_part(p, lz[0] == version, lz[1], lz[2], lz[3], lz[4], lz[5], lz[6],
-                              lz[7], points, triangles, faces, chunk_offsets, part_chunks, chunk_sph)
+                _prepare_part(p, lz[0] == version, lz[1], lz[2], lz[3], lz[4], lz[5],
+                              lz[6], points, triangles, faces, chunk_offsets, part_chunks, chunk_sph)
                 ready[p] = version
             for c in range(part_chunks[p], part_chunks[p + 1]):
                 if not _ray_enters(ox, oy, oz, dx, dy, dz, chunk_sph[c, 0], chunk_sph[c, 1],
@@ -586,8 +604,8 @@ def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offse
             if dx * dx + dy * dy + dz * dz > rr * rr:
                 continue
             if ready[p] != version:
-                _prepare_part(p, lz[0] == version, lz[1], lz[2], lz[3], lz[4], lz[5], lz[6],
-                              lz[7], points, triangles, faces, chunk_offsets, part_chunks, chunk_sph)
+                _prepare_part(p, lz[0] == version, lz[1], lz[2], lz[3], lz[4], lz[5],
+                              lz[6], points, triangles, faces, chunk_offsets, part_chunks, chunk_sph)
                 ready[p] = version
             for c in range(part_chunks[p], part_chunks[p + 1]):
                 dx = chunk_sph[c, 0] - px
