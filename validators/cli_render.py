@@ -62,7 +62,7 @@ def render_cmd(path, output, clip, time_, size, max_frames):
     except Exception as e:  # the renderer itself (no OpenGL context, ...)
         from .summary import one_line
         click.echo(f"colossus render: could not draw on this machine: {one_line(e)}", err=True)
-        sys.exit(1)
+        sys.exit(2)  # the contract's render statuses are 0 and 2
     unit = "frame" if suffix == ".gif" else "part"
     note = f" ({failing} {unit}{'s' if failing > 1 else ''} with a failing sphere)" if failing else ""
     click.echo(f"colossus render {path} -> {output} [{what}]{note}")
