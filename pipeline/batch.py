@@ -36,6 +36,8 @@ import uuid
 from collections import deque
 from concurrent.futures import Future
 
+from .errors import one_line
+
 #: A glob is an input that does not exist as written and contains one of these.
 GLOB_CHARS = "*?["
 
@@ -382,11 +384,6 @@ class Progress:
         if self._bar is not None:
             self._bar.__exit__(None, None, None)
             self._bar = None
-
-
-def one_line(e) -> str:
-    s = " ".join(str(e).split())
-    return s[:300] or type(e).__name__
 
 
 # ------------------------------------------------------------------------------ import

@@ -7,6 +7,12 @@ Library code raises these; only the command line turns them into messages and ex
 from __future__ import annotations
 
 
+def one_line(e: BaseException, limit: int = 300) -> str:
+    """An exception's message on one line (whitespace collapsed, at most ``limit`` characters)."""
+    text = " ".join(str(e).split())
+    return text[:limit] or type(e).__name__
+
+
 class ColossusError(Exception):
     """Base class of every error colossus raises on purpose."""
 

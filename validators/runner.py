@@ -1,4 +1,4 @@
-"""Running the rules: one asset (:func:`check_asset`) or many paths (:func:`check_paths`)."""
+"""Running the rules on one asset (:func:`check_asset`); many assets: :mod:`validators.parallel`."""
 
 from __future__ import annotations
 
@@ -8,6 +8,8 @@ import traceback
 from pathlib import Path
 
 from pxr import Usd
+
+from pipeline.errors import one_line
 
 from . import tolerances as tol
 from .asset import LoadedAsset, open_stage
@@ -117,13 +119,13 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
         try:
             stage = open_stage(path)
         except Exception as e:  # usd-core raises Tf.ErrorException and friends
-            add("COL001", f"usd-core cannot open the asset: {_one_line(e)}")
+            add("COL001", f"usd-core cannot open the asset: {one_line(e)}")
             report.sort()
             return report
     try:
         asset = LoadedAsset(stage, path)
     except Exception as e:
-        add("COL001", f"the asset could not be read: {_one_line(e)}")
+        add("COL001", f"the asset could not be read: {one_line(e)}")
         report.sort()
         return report
     ctx = Context(asset, **options)
@@ -144,16 +146,11 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
                                                h["sort_key"]))
         except Exception as e:
             tb = traceback.extract_tb(e.__traceback__)[-1]
-            add("COL002", f"rule {rule.code} ({rule.name}) crashed: {type(e).__name__}: {_one_line(e)} "
+            add("COL002", f"rule {rule.code} ({rule.name}) crashed: {type(e).__name__}: {one_line(e)} "
                           f"[{Path(tb.filename).name}:{tb.lineno}]", validator=rule.code)
     report.stats = _stats(asset, ctx, t_load, time.perf_counter() - t0)
     report.sort()
     return report
-
-
-def _one_line(e) -> str:
-    s = " ".join(str(e).split())
-    return s[:300] or type(e).__name__
 
 
 def _stats(asset, ctx, t_load, t_total) -> dict:
@@ -176,102 +173,10 @@ def _stats(asset, ctx, t_load, t_total) -> dict:
 
 
 # ------------------------------------------------------------------------------ many paths
-def discover(paths):
-    """Expand paths: directories recurse for ``*.usd, *.usda, *.usdc, *.usdz`` (sorted); files
-    are taken as given.  Returns ``(assets, missing)``."""
-    assets, missing = [], []
-    for p in paths:
-        p = os.fspath(p)
-        if os.path.isdir(p):
-            found = []
-            for root, dirs, files in os.walk(p):
-                dirs.sort()
-                found += [os.path.join(root, f) for f in files if f.lower().endswith(USD_SUFFIXES)]
-            assets += sorted(found)
-        elif os.path.exists(p):
-            assets.append(p)
-        else:
-            missing.append(p)
-    return assets, missing
-
-
-def _worker(args):
-    path, kw = args
-    return check_asset(path, **kw)
-
-
-def check_paths(paths, jobs=1, progress=None, **kw):
-    """Check every asset under ``paths`` (see :func:`discover`), in ``jobs`` processes.
-
-    (``colossus validate`` uses :func:`validators.parallel.check_many` instead: globs, Dask,
-    per-clip splitting of large assets, one isolated retry, Ctrl-C; this stays as the simple
-    library call.)
-
-    ``progress``: optional callable ``(done, total, path)``.  A worker process that dies on an
-    asset (a crash inside usd-core) yields a ``COL001`` report for that asset; the others go on.
-    Returns ``(reports, missing)`` with reports in input order, missing paths included as
-    ``COL003`` reports.
-    """
-    assets, missing = discover(paths)
-    order = list(assets) + list(missing)
-    reports = {}
-    total = len(order)
-    done = 0
-    for m in missing:
-        reports[m] = check_asset(m, **kw)
-    if jobs <= 1 or len(assets) <= 1:
-        for a in assets:
-            reports[a] = check_asset(a, **kw)
-            done += 1
-            if progress:
-                progress(done, len(assets), a)
-    else:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-        from concurrent.futures.process import BrokenProcessPool
-        pending = list(assets)
-        while pending:
-            with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as ex:
-                futs = {ex.submit(_worker, (a, kw)): a for a in pending}
-                broken = []
-                for fut in as_completed(futs):
-                    a = futs[fut]
-                    try:
-                        reports[a] = fut.result()
-                    except BrokenProcessPool:
-                        broken.append(a)
-                        continue
-                    except Exception as e:  # pragma: no cover - check_asset does not raise
-                        reports[a] = _crash_report(a, e, kw)
-                    done += 1
-                    if progress:
-                        progress(done, len(assets), a)
-            if broken and len(broken) == len(pending):
-                # Isolate: run the survivors one at a time so one crashing asset cannot take others down.
-                for a in broken:
-                    reports[a] = _isolated(a, kw)
-                    done += 1
-                    if progress:
-                        progress(done, len(assets), a)
-                broken = []
-            pending = broken
-    return [reports[p] for p in order], missing
+# Many assets run through :func:`validators.parallel.check_many` (processes, Dask, retries).
 
 
 def _crash_report(path, e, kw):
     rep = AssetReport(path)
-    rep.findings.append(_finding("COL001", f"checking the asset crashed: {_one_line(e)}", kw.get("severities")))
+    rep.findings.append(_finding("COL001", f"checking the asset crashed: {one_line(e)}", kw.get("severities")))
     return rep
-
-
-def _isolated(path, kw):
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-    from concurrent.futures.process import BrokenProcessPool
-    with ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn")) as ex:
-        try:
-            return ex.submit(_worker, (path, kw)).result()
-        except BrokenProcessPool:
-            return _crash_report(path, RuntimeError("the checker process died (usd-core crashed on this file)"), kw)
-        except Exception as e:  # pragma: no cover
-            return _crash_report(path, e, kw)
