@@ -151,7 +151,7 @@ def make_bench_asset(path):
     stage.GetRootLayer().Save()
 
     # fit the spheres in joint space over the bind pose and every frame
-    col = load_collider(path, verify=False)
+    col = load_collider(path)
     d = col.data
     local = {p: [] for p in range(JOINTS)}
     poses = [(None, 0.0, bind)] + [("wave", float(t), None) for t in col.frame_times("wave")]
@@ -200,7 +200,7 @@ def run_bench(path=None, repeat=50):
     if path is None:
         tmp = tempfile.TemporaryDirectory()
         path = make_bench_asset(os.path.join(tmp.name, "centipede.usda"))
-    col = load_collider(path, verify=False)
+    col = load_collider(path)
     d = col.data
     rng = np.random.default_rng(0)
     times = iter(rng.uniform(0, FRAMES - 1, 10 ** 6))
