@@ -36,13 +36,6 @@ RINGS, AROUND, JOINTS, FRAMES = 250, 80, 40, 48
 LENGTH, RADIUS = 8.0, 0.35
 
 
-def _quat_axis(axis, angle):
-    """(..., 4) (x, y, z, w) quaternions for rotations by ``angle`` about unit ``axis``."""
-    angle = np.asarray(angle, dtype=np.float64)
-    s = np.sin(angle / 2)[..., None] * np.asarray(axis, dtype=np.float64)
-    return np.concatenate([s, np.cos(angle / 2)[..., None]], -1)
-
-
 def _geometry():
     theta = 2 * np.pi * np.arange(AROUND) / AROUND
     xs = np.linspace(0.0, LENGTH, RINGS)
@@ -68,6 +61,7 @@ def _geometry():
 def make_bench_asset(path):
     """Write the benchmark collider (see the module docstring) to ``path``."""
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+    from scipy.spatial.transform import Rotation  # benchmark data only (the runtime needs no scipy)
 
     from .collider import load_collider
 
@@ -112,15 +106,9 @@ def make_bench_asset(path):
         tr[0] += [0.4 * np.sin(ph), 0.2 * np.sin(2 * ph), 0.0]
         bend = 0.12 * np.sin(ph - k * 0.5)
         twist = 0.05 * np.cos(ph - k * 0.3)
-        q = _quat_axis([0, 0, 1], bend)
-        q2 = _quat_axis([1, 0, 0], twist)
-        # q * q2 (xyzw)
-        x1, y1, z1, w1 = np.moveaxis(q, -1, 0)
-        x2, y2, z2, w2 = np.moveaxis(q2, -1, 0)
-        qq = np.stack([w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2, w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-                       w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2, w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2], 1)
+        qq = (Rotation.from_rotvec(bend[:, None] * [0, 0, 1]) * Rotation.from_rotvec(twist[:, None] * [1, 0, 0])).as_quat()
         ta.Set(Vt.Vec3fArray.FromNumpy(tr.astype(np.float32)), f)
-        ra.Set(Vt.QuatfArray([Gf.Quatf(float(v[3]), float(v[0]), float(v[1]), float(v[2])) for v in qq]), f)
+        ra.Set(Vt.QuatfArray.FromNumpy(qq.astype(np.float32)), f)  # (x, y, z, w), pxr's numpy order
         sa.Set(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * JOINTS), f)
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
 

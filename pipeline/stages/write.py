@@ -140,7 +140,7 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
             anim.CreateJointsAttr(Vt.TokenArray(jpaths))
             t, q, s = decompose_trs(clip.local)
             ta, ra, sa = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr(), anim.CreateScalesAttr()
-            qxyzw = np.ascontiguousarray(q[..., [1, 2, 3, 0]], dtype=np.float32)
+            qxyzw = np.ascontiguousarray(q, dtype=np.float32)
             for f, code in enumerate(clip.times):
                 tc = Usd.TimeCode(float(code))
                 ta.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(t[f], dtype=np.float32)), tc)
