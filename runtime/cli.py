@@ -74,7 +74,9 @@ def render_gif(col, run, path, size=(480, 360), max_frames=MAX_FRAMES):
         text = f"{run.clip}  t={run.times[i]:.4g}  {state}"
         if state in ("holding", "hanging"):
             text += f"  energy {run.energy[i]:.0%}"
-        if hasattr(label, "SetInput"):
+        if hasattr(label, "set_text"):  # a CornerAnnotation (pyvista >= 0.43)
+            label.set_text("upper_left", text)
+        elif hasattr(label, "SetInput"):
             label.SetInput(text)
         pl.write_frame()
     pl.close()
