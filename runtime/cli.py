@@ -114,8 +114,9 @@ def play_cmd(asset, clip, output, radius, substeps, verify, script_path, csv_pat
     col = load_collider(asset, verify=require_passing if verify else None)
     if not col.clips:
         raise ColliderError(f"{asset}: has no animation clips")
-    clip = clip or (script.clip if script is not None and script.clip else col.clips[0])
-    if clip not in col.clips:
+    if script is None:
+        clip = clip or col.clips[0]
+    if clip is not None and clip not in col.clips:  # a script's own clip is checked with the script
         raise click.UsageError(f"no clip {clip!r} in {asset}; clips: {', '.join(col.clips)}")
     if not str(output).lower().endswith(".gif"):
         raise click.UsageError("-o must name a .gif file")
@@ -135,7 +136,7 @@ def play_cmd(asset, clip, output, radius, substeps, verify, script_path, csv_pat
     r = run.radius
     landed = f"landed at t={run.landed_at:g}" if run.landed_at is not None else "never landed"
     states = ", ".join(f"{k} {v}" for k, v in run.state_counts().items())
-    click.echo(f"play {os.path.basename(asset)} clip {clip!r}: {len(run.times)} steps at {run.rate:g}/s, "
+    click.echo(f"play {os.path.basename(asset)} clip {run.clip!r}: {len(run.times)} steps at {run.rate:g}/s, "
                f"radius {r:.4g}, {landed}; {states}")
     click.echo(f"largest penetration {run.max_penetration:.4g} ({run.max_penetration / r:.1%} of radius)")
     click.echo(f"largest slip relative to the surface {run.max_slip:.4g} per step "
