@@ -132,6 +132,8 @@ STUCK = 0.1
 _MIN_COS = 0.2
 #: The contact triangle of the terrain plane, and of no contact at all.
 NO_TRIANGLE = -1
+_ZERO = np.zeros(3)
+_ZERO.flags.writeable = False  # shared "no motion"; never written in place
 
 
 @dataclass(frozen=True)
@@ -160,10 +162,12 @@ class Intent:
         object.__setattr__(self, "move", m)
         object.__setattr__(self, "jump", bool(self.jump))
         object.__setattr__(self, "grab", bool(self.grab))
+        object.__setattr__(self, "_moving", bool(m.any()))
 
     @property
     def moving(self) -> bool:
-        return bool(self.move.any())
+        """Whether ``move`` is not zero."""
+        return self._moving
 
 
 IDLE = Intent()
@@ -274,18 +278,37 @@ def _summarize(normal, depth, skin, tol, up, cos_slope, cap, ground, out):
 
 
 @njit(cache=True)
-def _frame(points, normals, out):
-    """out (6,): [0:3] centroid of points (C, 3), [3:6] unit mean of normals (C, 3) (zeros if
-    they cancel)."""
-    C = points.shape[0]
+def _surface_frame(points, triangles, tri, bary, out):
+    """The frame of surface points (tri (C,), barycentric bary (C, 3)) on the posed ``points``
+    (V, 3) float32: out (6,) = [centroid of the points, unit mean of their triangles' unit
+    normals (counter-clockwise = outward; zeros if they cancel)].  What ``Pose.track`` and
+    ``Pose.face_normals`` give, fused into one pass for the controller's per-step budget."""
     for k in range(6):
         out[k] = 0.0
+    C = tri.shape[0]
     for i in range(C):
+        f = tri[i]
+        a, b, c = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+        ax, ay, az = np.float64(points[a, 0]), np.float64(points[a, 1]), np.float64(points[a, 2])
+        bx, by, bz = np.float64(points[b, 0]), np.float64(points[b, 1]), np.float64(points[b, 2])
+        cx, cy, cz = np.float64(points[c, 0]), np.float64(points[c, 1]), np.float64(points[c, 2])
+        u, v, w = bary[i, 0], bary[i, 1], bary[i, 2]
+        out[0] += u * ax + v * bx + w * cx
+        out[1] += u * ay + v * by + w * cy
+        out[2] += u * az + v * bz + w * cz
+        e1x, e1y, e1z = bx - ax, by - ay, bz - az
+        e2x, e2y, e2z = cx - ax, cy - ay, cz - az
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if ln > 0.0:
+            out[3] += nx / ln
+            out[4] += ny / ln
+            out[5] += nz / ln
+    if C > 0:
         for k in range(3):
-            out[k] += points[i, k]
-            out[3 + k] += normals[i, k]
-    for k in range(3):
-        out[k] /= C
+            out[k] /= C
     ln = math.sqrt(out[3] * out[3] + out[4] * out[4] + out[5] * out[5])
     if ln > 0.0:
         for k in range(3, 6):
@@ -293,24 +316,45 @@ def _frame(points, normals, out):
 
 
 @njit(cache=True)
-def _carry(pos, a0, n0, a1, n1, out):
-    """out (3,) = a1 + R (pos - a0), R the least rotation taking unit n0 to unit n1 (Rodrigues
-    with w = n0 x n1, c = n0 . n1: R v = c v + w x v + w (w . v) / (1 + c)); translation only
-    when the normals are (nearly) opposite or zero."""
-    vx, vy, vz = pos[0] - a0[0], pos[1] - a0[1], pos[2] - a0[2]
-    c = n0[0] * n1[0] + n0[1] * n1[1] + n0[2] * n1[2]
-    ok = (n0[0] * n0[0] + n0[1] * n0[1] + n0[2] * n0[2]) > 0.5 and \
-        (n1[0] * n1[0] + n1[1] * n1[1] + n1[2] * n1[2]) > 0.5
+def _carry(pos, f0, f1, dt, out, vel):
+    """Carry ``pos`` (3,) with a surface frame: f0, f1 (6,) are the frames (centroid, unit mean
+    normal) before and after.  out (3,) = c1 + R (pos - c0), R the least rotation taking n0 to
+    n1 (Rodrigues with w = n0 x n1, c = n0 . n1: R v = c v + w x v + w (w . v) / (1 + c));
+    translation only when a normal is zero or they are (nearly) opposite.  vel (3,) = (c1 - c0)
+    / dt; returns its length."""
+    vx, vy, vz = pos[0] - f0[0], pos[1] - f0[1], pos[2] - f0[2]
+    c = f0[3] * f1[3] + f0[4] * f1[4] + f0[5] * f1[5]
+    ok = (f0[3] * f0[3] + f0[4] * f0[4] + f0[5] * f0[5]) > 0.5 and \
+        (f1[3] * f1[3] + f1[4] * f1[4] + f1[5] * f1[5]) > 0.5
     if ok and c > -0.99:
-        wx = n0[1] * n1[2] - n0[2] * n1[1]
-        wy = n0[2] * n1[0] - n0[0] * n1[2]
-        wz = n0[0] * n1[1] - n0[1] * n1[0]
+        wx = f0[4] * f1[5] - f0[5] * f1[4]
+        wy = f0[5] * f1[3] - f0[3] * f1[5]
+        wz = f0[3] * f1[4] - f0[4] * f1[3]
         k = (wx * vx + wy * vy + wz * vz) / (1.0 + c)
         rx = c * vx + (wy * vz - wz * vy) + wx * k
         ry = c * vy + (wz * vx - wx * vz) + wy * k
         rz = c * vz + (wx * vy - wy * vx) + wz * k
         vx, vy, vz = rx, ry, rz
-    out[0], out[1], out[2] = a1[0] + vx, a1[1] + vy, a1[2] + vz
+    out[0], out[1], out[2] = f1[0] + vx, f1[1] + vy, f1[2] + vz
+    s2 = 0.0
+    for k in range(3):
+        vel[k] = (f1[k] - f0[k]) / dt
+        s2 += vel[k] * vel[k]
+    return math.sqrt(s2)
+
+
+@njit(cache=True)
+def _tangential(a, b, c, normal):
+    """Length of the part of ``a - b - c`` (3,) across unit ``normal``: the slip."""
+    x, y, z = a[0] - b[0] - c[0], a[1] - b[1] - c[1], a[2] - b[2] - c[2]
+    d = x * normal[0] + y * normal[1] + z * normal[2]
+    x, y, z = x - d * normal[0], y - d * normal[1], z - d * normal[2]
+    return math.sqrt(x * x + y * y + z * z)
+
+
+@njit(cache=True)
+def _length(v):
+    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
 
 @njit(cache=True)
@@ -349,12 +393,12 @@ def carry_point(position, a0, n0, a1, n1) -> np.ndarray:
     """(3,) ``position`` carried by a surface frame moving from centroid ``a0`` with unit normal
     ``n0`` to ``a1``, ``n1``: translated with the centroid, its offset turned by the least
     rotation taking n0 to n1."""
-    args = [np.ascontiguousarray(np.asarray(v, dtype=np.float64).reshape(3)) for v in (position, a0, n0, a1, n1)]
-    for name, v in zip(("n0", "n1"), args[2:5:2]):
-        if abs(float(v @ v) - 1.0) > 1e-6:
-            raise ValueError(f"{name} must be a unit vector, got {v}")
+    v = [np.asarray(x, dtype=np.float64).reshape(3) for x in (position, a0, n0, a1, n1)]
+    for name, n in (("n0", v[2]), ("n1", v[4])):
+        if abs(float(n @ n) - 1.0) > 1e-6:
+            raise ValueError(f"{name} must be a unit vector, got {n}")
     out = np.empty(3)
-    _carry(*args, out)
+    _carry(v[0], np.concatenate(v[1:3]), np.concatenate(v[3:5]), 1.0, out, np.empty(3))
     return out
 
 
@@ -379,6 +423,7 @@ class _Touch:
 
     @property
     def pen(self):
+        """Deepest penetration at the radius (-inf when none)."""
         return self.summary[3]
 
 
@@ -433,6 +478,7 @@ class CharacterController:
         self.max_iterations = int(max_iterations)
         self.floor = None if floor is None else _finite("floor", floor)
         self.up = np.ascontiguousarray(collider.up, dtype=np.float64)
+        self._triangles = np.ascontiguousarray(collider.triangles, dtype=np.int64)
         self._g = -self.up * self.gravity
         self._cos_slope = math.cos(math.radians(self.max_slope))
         self._feel = r + self.skin
@@ -454,11 +500,14 @@ class CharacterController:
         self.velocity = np.zeros(3) if velocity is None else _vec3("velocity", velocity)
         self.state = FALLING
         self.energy = 1.0
-        self.anchors = None
         self.normal = self.up.copy()
-        self._v_rel = np.zeros(3)
-        self._frame_key = None
-        self._frame_val = None
+        self._v_rel = _ZERO
+        self._unanchor()
+
+    @property
+    def anchors(self) -> SurfacePoints | None:
+        """The contacts carried into the next step, as surface points (None: none)."""
+        return None if self._atri is None else SurfacePoints(self._atri, self._abary)
 
     def step(self, pose_prev: Pose, pose_next: Pose, dt: float, intent: Intent | None = None) -> Step:
         """Advance the player from ``pose_prev`` to ``pose_next`` over ``dt`` seconds (> 0) with
@@ -474,28 +523,25 @@ class CharacterController:
         if not isinstance(it, Intent):
             raise TypeError(f"intent must be an Intent, got {type(it).__name__}")
         self._queries = 0
-        up = self.up
         pos = self.position
         state = self.state
-        anchored = self.anchors is not None
-        v_surf = np.zeros(3)
+        anchored = self._atri is not None
         # 1. carry along the previous contacts
         if anchored:
-            f0 = self._frame_on(pose_prev)
-            f1 = self._frame_on(pose_next)
-            carried = np.empty(3)
-            _carry(pos, f0[:3], f0[3:], f1[:3], f1[3:], carried)
-            v_surf = (f1[:3] - f0[:3]) / dt
-            pos = carried
-        held_speed = float(math.sqrt(v_surf @ v_surf))
+            pos = np.empty(3)
+            v_surf = np.empty(3)
+            held_speed = _carry(self.position, self._frame_on(pose_prev), self._frame_on(pose_next), dt,
+                                pos, v_surf)
+        else:
+            v_surf, held_speed = _ZERO, 0.0
+        carried = pos
         # 2. intent: transitions it causes, then the state's own motion
         if state in (HOLDING, HANGING) and not it.grab:
             state = self._release(v_surf + self._v_rel)
         elif state in (STANDING, SLIDING) and it.grab and self.energy > 0 and anchored:
             state = HOLDING
         elif state == STANDING and it.jump:
-            walk = self._along(it, self.walk_speed)
-            self.velocity = v_surf + walk + self.jump_speed * up
+            self.velocity = v_surf + self._along(it, self.walk_speed) + self.jump_speed * self.up
             state = self._release(self.velocity)
         if state == STANDING:
             self._v_rel = self._along(it, self.walk_speed)
@@ -506,13 +552,12 @@ class CharacterController:
         elif state == HOLDING:
             self._v_rel = self._along(it, self.climb_speed)
         elif state == HANGING:
-            self._v_rel = np.zeros(3)
+            self._v_rel = _ZERO
         if state == FALLING:
             self.velocity = _clamp(self.velocity + self._g * dt, self.max_fall_speed)
             disp = self.velocity * dt
         else:
-            disp = self._v_rel * dt
-        base = pos + disp
+            disp = self._v_rel * dt if self._v_rel is not _ZERO else _ZERO
         # 3-4. sweep in sub-steps, resolving each
         pos, touch, substeps = self._sweep(pose_next, pos, disp, state)
         # 5. classify
@@ -527,36 +572,35 @@ class CharacterController:
                 state = self._release(v_surf)
         self.state = state
         self.position = pos
-        slip = 0.0
-        if anchored and state != FALLING:
-            s = pos - base
-            s = s - (s @ self.normal) * self.normal
-            slip = float(math.sqrt(s @ s))
-        velocity = self.velocity.copy() if state == FALLING else v_surf + self._v_rel
-        if state != FALLING:
+        if state == FALLING:
+            slip, velocity = 0.0, self.velocity.copy()
+        else:
+            slip = _tangential(pos, carried, disp, self.normal) if anchored else 0.0
+            velocity = v_surf + self._v_rel
             self.velocity = velocity.copy()
         deep = int(touch.summary[4])
         return Step(time=float(pose_next.time), seconds=float(pose_next.seconds), state=state,
-                    position=pos.copy(), velocity=velocity, surface_velocity=v_surf,
+                    position=pos.copy(), velocity=velocity,
+                    surface_velocity=v_surf.copy() if anchored else np.zeros(3),
                     held_speed=held_speed,
                     triangle=int(touch.triangle[deep]) if deep >= 0 else NO_TRIANGLE,
-                    penetration=max(0.0, float(touch.pen)), slip=slip, energy=self.energy,
+                    penetration=max(0.0, float(touch.summary[3])), slip=slip, energy=self.energy,
                     on_floor=touch.on_floor, substeps=substeps, queries=self._queries)
 
     # -- the step's parts
 
     def _along(self, it, speed):
-        out = np.zeros(3)
-        if it.moving and speed > 0:
-            _along(it.move, self.normal, speed, out)
+        if not (it.moving and speed > 0):
+            return _ZERO
+        out = np.empty(3)
+        _along(it.move, self.normal, speed, out)
         return out
 
     def _release(self, velocity):
         """Let go of the surface: airborne with world ``velocity``."""
         self.velocity = np.array(velocity, dtype=np.float64)
-        self.anchors = None
-        self._frame_key = None
-        self._v_rel = np.zeros(3)
+        self._unanchor()
+        self._v_rel = _ZERO
         self.normal = self.up.copy()
         return FALLING
 
@@ -583,7 +627,7 @@ class CharacterController:
     def _settle(self, pose, pos, touch):
         """Resolve ``touch`` at ``pos``: at most ``max_iterations`` pushes, re-querying after each."""
         for _ in range(self.max_iterations):
-            if not touch.pen > self.tolerance:
+            if not touch.summary[3] > self.tolerance:
                 break
             push = touch.summary[:3]
             if not push.any():  # opposed contacts: nothing clears them (thesis figure 16)
@@ -594,16 +638,19 @@ class CharacterController:
 
     def _sweep(self, pose, pos, disp, state):
         """Move by ``disp`` in sub-steps of at most ``substep``, resolving each (module docstring)."""
-        length = float(math.sqrt(disp @ disp))
-        n = max(1, math.ceil(length / self.substep - 1e-9))
-        d = disp / n
+        length = 0.0 if disp is _ZERO else _length(disp)
+        n = 1 if length <= self.substep else math.ceil(length / self.substep - 1e-9)
+        d = disp / n if n > 1 else disp
         prev = None
         stuck = STUCK * self.radius
         for _ in range(n):
-            target = pos + d
+            target = pos + d if length > 0 else pos
             touch = self._touch(pose, target)
+            if not touch.summary[3] > self.tolerance:  # clear: the common case
+                pos, prev = target, touch
+                continue
             new, touch = self._settle(pose, target, touch)
-            if touch.pen > stuck:  # cannot be cleared: stay where it was (clear, or carried there)
+            if touch.summary[3] > stuck:  # cannot be cleared: stay where it was (clear, or carried there)
                 new, touch = pos, (prev if prev is not None else self._touch(pose, pos))
             moved = new - target
             mm = float(moved @ moved)
@@ -648,7 +695,7 @@ class CharacterController:
         new = pos + direction * max(move, 0.0)
         touch = self._touch(pose, new)
         new, touch = self._settle(pose, new, touch)
-        if touch.pen > STUCK * self.radius:
+        if touch.summary[3] > STUCK * self.radius:
             return None
         return new, touch
 
@@ -684,7 +731,7 @@ class CharacterController:
         if it.grab and self.energy > 0 and body.any():
             self._anchor(pose_next, touch, body)
             self.normal = _unit_mean(touch.normal[body], self.normal)
-            self._v_rel = np.zeros(3)
+            self._v_rel = _ZERO
             return pos, touch, HOLDING
         # land only on a surface it moves towards (relative to that surface's own motion)
         v_c = self._contact_velocity(pose_prev, touch, dt)
@@ -699,17 +746,21 @@ class CharacterController:
         """Standing, sliding or falling from contacts ``touch`` at ``pos`` (already snapped)."""
         s = touch.summary
         if s[11] > 0:  # ground
-            g = touch.ground
-            if touch.on_floor and g[touch.triangle < 0].any():
-                self._anchor(pose, touch, None)  # the static terrain: nothing to be carried by
+            if not touch.on_floor:
+                # every contact on the body: anchor on the ground ones (all of them, usually)
+                self._anchor(pose, touch, None if s[11] == touch.count else touch.ground)
+            elif touch.ground[touch.triangle < 0].any():
+                self._unanchor()  # the static terrain: nothing to be carried by
             else:
-                self._anchor(pose, touch, g & (touch.triangle >= 0))
+                self._anchor(pose, touch, touch.ground & (touch.triangle >= 0))
             self.normal = s[8:11].copy()
-            self._v_rel = np.zeros(3)
+            self._v_rel = _ZERO
             return pos, touch, STANDING
         if touch.count and float(s[5:8] @ self.up) > 0:  # steep, but facing up: slide
-            body = touch.triangle >= 0
-            self._anchor(pose, touch, body if body.any() else None)
+            if touch.on_floor:
+                self._anchor(pose, touch, touch.triangle >= 0)
+            else:
+                self._anchor(pose, touch, None)
             self.normal = s[5:8].copy()
             if not landing:
                 self._v_rel = self._v_rel - (self._v_rel @ self.normal) * self.normal
@@ -717,18 +768,22 @@ class CharacterController:
         return pos, touch, self._release(velocity)
 
     def _anchor(self, pose, touch, mask):
-        """Keep the contacts ``mask`` of ``touch`` (on ``pose``) as the surface points to carry
-        the player by (None: none)."""
-        if mask is None or not mask.any():
-            self.anchors = None
-            self._frame_key = None
+        """Keep the contacts of ``touch`` (on ``pose``) selected by ``mask`` (None: all) as the
+        surface points to carry the player by, with their frame on ``pose``."""
+        if mask is None:
+            tri, bary = touch.triangle, touch.barycentric
+        elif not mask.any():
+            self._unanchor()
             return
-        tri = touch.triangle[mask]
-        self.anchors = SurfacePoints(tri, touch.barycentric[mask])
-        out = np.empty(6)
-        _frame(touch.point[mask], pose.face_normals(tri), out)
+        else:
+            tri, bary = touch.triangle[mask], touch.barycentric[mask]
+        self._atri, self._abary = tri, bary
         self._frame_key = _pose_key(pose)
-        self._frame_val = out
+        self._frame_val = self._frame_now(pose)
+
+    def _unanchor(self):
+        self._atri = self._abary = None
+        self._frame_key = self._frame_val = None
 
     def _frame_on(self, pose):
         """(6,) the anchors' centroid and unit mean triangle normal on ``pose`` (cached for the
@@ -736,8 +791,11 @@ class CharacterController:
         key = _pose_key(pose)
         if key is not None and key == self._frame_key:
             return self._frame_val
+        return self._frame_now(pose)
+
+    def _frame_now(self, pose):
         out = np.empty(6)
-        _frame(self.anchors.at(pose), pose.face_normals(self.anchors.triangles), out)
+        _surface_frame(pose.points, self._triangles, self._atri, self._abary, out)
         return out
 
     def _contact_velocity(self, pose_prev, touch, dt):
@@ -747,8 +805,7 @@ class CharacterController:
         if not body.any():
             return np.zeros(3)
         then = pose_prev.track(touch.triangle[body], touch.barycentric[body])
-        v = (touch.point[body] - then).sum(0) / (dt * len(touch.triangle))
-        return v
+        return (touch.point[body] - then).sum(0) / (dt * len(touch.triangle))
 
 
 def _pose_key(pose):
