@@ -2,8 +2,9 @@
 
 A sphere of ``radius`` stands, slides, holds (climbs), hangs and falls on a deforming triangle
 mesh.  It uses only the public collider API: :meth:`Pose.sphere_contacts`,
-:meth:`Pose.raycast`, :meth:`Pose.face_normals` and surface points (:class:`SurfacePoints`,
-:meth:`Pose.track`).  The anchors are game engines' kinematic character controllers - Jolt's
+:meth:`Pose.raycast`, surface points (:class:`SurfacePoints`, :meth:`Pose.track`) and, for the
+per-step frame of its contacts (where :meth:`Pose.track` and :meth:`Pose.face_normals` would
+take two calls), :attr:`Pose.points` and :attr:`Collider.triangles`.  The anchors are game engines' kinematic character controllers - Jolt's
 ``CharacterVirtual`` (max slope, stick to floor, ground velocity), Godot's
 ``CharacterBody3D.move_and_slide`` (floor max angle, platform velocity, floor snap), Unity's
 ``CharacterController`` (slope limit, skin width), PhysX's CCT - none of which works on a
@@ -28,13 +29,13 @@ One :meth:`CharacterController.step` from ``pose_prev`` to ``pose_next`` (``dt``
    a jump or a fall inherits (momentum inheritance).
 2. **Intent and gravity**, by state (below).
 3. **Sweep** (thesis 4.3.5, the bullet-through-paper problem).  The player's own displacement
-   is cut into sub-steps no longer than ``substep`` (at most the radius) and the contacts are
-   resolved at each one.  This cannot tunnel: if the centre's path crossed a triangle at X
-   within one sub-step, then from the sub-step's start S (resolved: no deeper than
-   ``tolerance`` into anything), ``|S - X| >= radius - tolerance``, so the end E has
-   ``|X - E| <= substep - |S - X| <= tolerance``: E is still within the radius of X, the
-   triangle is among E's contacts, and E's centre is at most ``tolerance`` past its plane, so
-   the resolution pushes it back to the side it came from.
+   is cut into sub-steps no longer than ``substep`` (shorter than the radius less the
+   tolerance) and the contacts are resolved at each one.  This cannot tunnel: every sub-step
+   starts resolved (no deeper than ``tolerance`` into anything, or back where it was), so every
+   triangle is at least ``radius - tolerance`` from its start S; a crossing at X within the
+   sub-step would need ``|S - X| <= substep < radius - tolerance``.  So the centre never
+   crosses a triangle: it meets one as a contact, on the side it came from, and is pushed back
+   out on that side.
 4. **Resolve** (thesis 5.5.2, discrete collision resolution).  Contacts deeper than
    ``tolerance`` are resolved by moving along the depth-weighted average of their normals, by
    the least distance that clears every contact facing that way (``depth_i / (n_i . n)``, to
@@ -85,7 +86,7 @@ parameter           default                            meaning
 ``energy_refill``   0.5 per second                     energy regained per second of standing
 ``skin``            0.05 x radius                      contact margin: touching within radius + skin
 ``snap``            0.5 x radius                       stick-to-surface reach beyond touching
-``substep``         1.0 x radius                       longest sweep sub-step (at most the radius)
+``substep``         0.5 x radius                       longest sweep sub-step (< radius - tolerance)
 ``tolerance``       0.002 x radius                     penetration left unresolved
 ``max_iterations``  4                                  resolution queries per sub-step
 ``floor``           None                               height of a static terrain plane (None: none)
@@ -123,7 +124,7 @@ ENERGY_REFILL = 0.5  # energy per second
 #: Radius-relative defaults.
 SKIN = 0.05
 SNAP = 0.5
-SUBSTEP = 1.0
+SUBSTEP = 0.5
 TOLERANCE = 0.002
 MAX_ITERATIONS = 4
 #: Penetration (x radius) still left after the iterations that makes a sub-step fall back to its start.
@@ -467,12 +468,13 @@ class CharacterController:
         self.energy_refill = _nonneg("energy_refill", energy_refill)
         self.skin = _positive("skin", SKIN * r if skin is None else skin)
         self.snap = _nonneg("snap", SNAP * r if snap is None else snap)
-        self.substep = _positive("substep", SUBSTEP * r if substep is None else substep)
-        if self.substep > r * (1 + 1e-12):
-            raise ValueError(f"substep must be at most the radius ({r:g}) or the sweep can tunnel, got {substep!r}")
         self.tolerance = _positive("tolerance", TOLERANCE * r if tolerance is None else tolerance)
         if self.tolerance >= self.skin:
             raise ValueError(f"tolerance ({self.tolerance:g}) must be below skin ({self.skin:g})")
+        self.substep = _positive("substep", SUBSTEP * r if substep is None else substep)
+        if not self.substep < r - self.tolerance:
+            raise ValueError(f"substep must be shorter than the radius less the tolerance ({r - self.tolerance:g}) "
+                             f"or the sweep can tunnel, got {substep!r}")
         if int(max_iterations) != max_iterations or max_iterations < 1:
             raise ValueError(f"max_iterations must be a whole number >= 1, got {max_iterations!r}")
         self.max_iterations = int(max_iterations)

@@ -389,7 +389,7 @@ def test_a_fast_player_never_passes_through_a_thin_limb(limb, limb_ref):
                 assert naive_raycast(P, T, start[None], seg[None], np.linalg.norm(seg))[1][0] == -1
             assert not inside_closed_mesh(P, T, s.position)
             assert ref.closest(pb.time, s.position)[2] > r - 0.01 * r
-            assert s.substeps >= 10 and s.queries <= s.substeps * (ctrl.max_iterations + 2) + 2 * (ctrl.max_iterations + 1)
+            assert s.substeps >= 20 and s.queries <= s.substeps * (ctrl.max_iterations + 2) + 2 * (ctrl.max_iterations + 1)
             # a single discrete step: straight to the end, where nothing touches any more
             end = start + d * speed * dt
             crossed = naive_raycast(P, T, start[None], (end - start)[None], speed * dt)[1][0] >= 0
@@ -406,8 +406,8 @@ def test_parameters_and_intent_are_checked(limb, limb_path):
     r = 0.1
     ok = CharacterController(limb, r)
     assert ok.walk_speed == pytest.approx(1.5 / limb.data.meters_per_unit)
-    assert ok.skin == pytest.approx(0.05 * r) and ok.substep == pytest.approx(r)
-    for kw, msg in [({"substep": 2 * r}, "at most the radius"), ({"max_slope": 95}, "between 0 and 90"),
+    assert ok.skin == pytest.approx(0.05 * r) and ok.substep == pytest.approx(0.5 * r)
+    for kw, msg in [({"substep": r}, "shorter than the radius"), ({"max_slope": 95}, "between 0 and 90"),
                     ({"hang_drain": 0}, "> 0"), ({"walk_speed": -1}, ">= 0"),
                     ({"tolerance": 0.5 * r}, "below skin"), ({"max_iterations": 0}, ">= 1"),
                     ({"floor": float("nan")}, "finite")]:

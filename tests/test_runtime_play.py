@@ -138,3 +138,17 @@ def test_play_cli_bad_script(imported, tmp_path):
         assert len(lines) == 1 and lines[0].startswith("error:") and "Traceback" not in res.output, (name, res.output)
         assert name in lines[0] or "dance" in lines[0]
         assert not out.exists() and not out.with_suffix(".csv").exists()
+
+
+def test_readme_controller_example_runs(imported):
+    """The README's controller snippet runs as written (on the imported sample) and its script
+    example is docs/play-climb.json."""
+    section = (ROOT / "README.md").read_text().split("### The character controller")[1]
+    code = section.split("```python\n")[1].split("```")[0]
+    code = code.replace('"out/creature.usda"', repr(str(imported("creature", "glb")[1])))
+    ns = {}
+    exec(compile(code, "README.md", "exec"), ns)
+    s = ns["s"]
+    assert s.state in STATES and s.penetration < 0.01 * 0.13
+    example = section.split("```json\n")[1].split("```")[0]
+    assert json.loads(example) == json.loads(EXAMPLE.read_text())
