@@ -69,6 +69,7 @@ def make_bench_asset(path):
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
     from scipy.spatial.transform import Rotation  # benchmark data only (the runtime needs no scipy)
 
+    from . import schema
     from .collider import load_collider
 
     pts, tris = _geometry()
@@ -134,14 +135,7 @@ def make_bench_asset(path):
     faces = np.argsort(owner, kind="stable")
     offsets = np.searchsorted(owner[faces], np.arange(JOINTS + 1))
     prim = mesh.GetPrim()
-    P = "colossus:parts:"
-    prim.CreateAttribute(P + "joints", Sdf.ValueTypeNames.TokenArray).Set(joints)
-    prim.CreateAttribute(P + "faceOffsets", Sdf.ValueTypeNames.IntArray).Set(Vt.IntArray(offsets.tolist()))
-    prim.CreateAttribute(P + "faces", Sdf.ValueTypeNames.IntArray).Set(Vt.IntArray(faces.tolist()))
-    prim.CreateAttribute(P + "centers", Sdf.ValueTypeNames.Float3Array).Set(
-        Vt.Vec3fArray.FromNumpy(np.zeros((JOINTS, 3), np.float32)))
-    radii = prim.CreateAttribute(P + "radii", Sdf.ValueTypeNames.FloatArray)
-    radii.Set(Vt.FloatArray([1e3] * JOINTS))
+    schema.write_parts(prim, list(joints), np.zeros((JOINTS, 3)), np.full(JOINTS, 1e3), offsets, faces)
     stage.GetRootLayer().Save()
 
     # fit the spheres in joint space over the bind pose and every frame
@@ -165,8 +159,7 @@ def make_bench_asset(path):
         a = np.concatenate(local[p])
         centers[p] = (a.min(0) + a.max(0)) / 2
         rads[p] = np.linalg.norm(a - centers[p], axis=1).max() * 1.01 + 1e-4
-    prim.GetAttribute(P + "centers").Set(Vt.Vec3fArray.FromNumpy(centers.astype(np.float32)))
-    radii.Set(Vt.FloatArray(rads.tolist()))
+    schema.write_parts(prim, list(joints), centers, rads, offsets, faces)
     stage.GetRootLayer().Save()
     return path
 

@@ -21,6 +21,8 @@ import time
 
 import numpy as np
 
+from runtime import schema
+
 from . import frameproof as fp
 
 
@@ -142,7 +144,7 @@ def make_library(directory, count=200, triangles=3000, bones=12, clips=3, frames
     import_asset(src, base)
     from pxr import Sdf
     layer = Sdf.Layer.FindOrOpen(base)
-    attr = next(s for s in _walk_attrs(layer) if s.name == "colossus:parts:radii")
+    attr = next(s for s in _walk_attrs(layer) if s.name == schema.PARTS_RADII)
     radii = np.array(attr.default, dtype=np.float64)
     rng = np.random.default_rng(seed)
     paths = []

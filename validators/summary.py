@@ -16,6 +16,7 @@ import os
 import numpy as np
 from pxr import UsdGeom
 
+from runtime import schema
 from runtime.errors import ColossusError, one_line
 
 from .asset import LoadedAsset, open_stage
@@ -129,7 +130,7 @@ def summarize(asset: LoadedAsset) -> dict:
     out["parts"] = parts
     prov = {}
     if asset.mesh is not None:
-        prov = _plain(dict(asset.mesh.GetCustomData().get("colossus", {}) or {}))
+        prov = _plain(dict(asset.mesh.GetCustomData().get(schema.PROVENANCE_KEY, {}) or {}))
     out["provenance"] = prov
     return out
 
