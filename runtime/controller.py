@@ -422,11 +422,6 @@ class _Touch:
     def count(self):
         return len(self.triangle)
 
-    @property
-    def pen(self):
-        """Deepest penetration at the radius (-inf when none)."""
-        return self.summary[3]
-
 
 class CharacterController:
     """A player sphere on a collider; see the module docstring for the step, the states and
@@ -461,7 +456,7 @@ class CharacterController:
         self.gravity = speed("gravity", gravity, GRAVITY)
         self.max_fall_speed = _positive("max_fall_speed", MAX_FALL_SPEED * si if max_fall_speed is None else max_fall_speed)
         self.hold_speed = speed("hold_speed", hold_speed, HOLD_SPEED)
-        self.max_slope = float(max_slope)
+        self.max_slope = _finite("max_slope", max_slope)
         if not 0.0 < self.max_slope < 90.0:
             raise ValueError(f"max_slope must be between 0 and 90 degrees, got {max_slope!r}")
         self.hang_drain = _positive("hang_drain", hang_drain)
