@@ -1,4 +1,5 @@
-"""``colossus bench``: benchmarks printed as ratios against baselines run in the same process.
+"""The import stage's benchmarks (``colossus bench --only import|scaling``; the command is
+:mod:`validators.cli_bench`): printed as ratios against baselines run in the same process.
 
 Absolute times are this machine's; the ratios are what to compare across machines.
 """
@@ -10,7 +11,6 @@ import os
 import tempfile
 import time
 
-import click
 import numpy as np
 
 
@@ -81,42 +81,3 @@ def bench_scaling(sizes=(50_000, 200_000, 800_000), echo=print):
         echo(f"  {len(faces):>10} {tw:8.3f} {to:9.3f} {tw / nlogn / base[0]:15.2f} {to / nlogn / base[1]:17.2f}")
     echo("  (columns 4-5: time per n log n relative to the smallest size; <= ~1 means no worse than n log n)")
     return rows
-
-
-@click.command("bench")
-@click.option("--quick", is_flag=True, help="Smaller sizes (a smoke run).")
-@click.option("--only", type=click.Choice(["import", "scaling", "validate", "runtime", "scale"]), multiple=True,
-              help="Run only these benchmarks (repeatable).")
-def bench_cmd(quick, only):
-    """Run the benchmarks; absolute times are this machine's, ratios are against in-process baselines."""
-    want = set(only) or {"import", "scaling", "validate", "runtime", "scale"}
-    click.echo(f"colossus bench on {os.cpu_count()} cores (absolute times are this machine's)\n")
-    if "import" in want:
-        bench_import(*((20_000, 20, 2, 30) if quick else ()), echo=click.echo)
-        click.echo()
-    if "scaling" in want:
-        bench_scaling((10_000, 40_000, 160_000) if quick else (50_000, 200_000, 800_000), echo=click.echo)
-        click.echo()
-    if "validate" in want:
-        try:
-            from validators.bench import format_bench, run_bench
-        except ImportError as exc:  # pragma: no cover
-            click.echo(f"validate benchmark unavailable: {exc}")
-        else:
-            click.echo(format_bench(run_bench()))
-            click.echo()
-    if "runtime" in want:
-        try:
-            from runtime.bench import format_rows as rt_format, run_bench as rt_run
-        except ImportError as exc:
-            click.echo(f"runtime benchmark unavailable: {exc}")
-        else:
-            click.echo(rt_format(rt_run()))
-    if "scale" in want:
-        try:
-            from .batch import format_bench as sc_format, run_bench as sc_run
-        except ImportError as exc:  # pragma: no cover
-            click.echo(f"scale benchmark unavailable: {exc}")
-        else:
-            click.echo()
-            click.echo(sc_format(sc_run(**({"count": 40} if quick else {}))))

@@ -8,34 +8,11 @@ import sys
 
 import click
 
-from .errors import ColossusError, InputError, OutputError, UsageError
+from .cli import maps_errors
+from .errors import OutputError, UsageError
 from .tolerances import PARTS_ANY_THRESHOLD
 
 LARGE_INPUT_BYTES = 4 * 2**20  # show a progress bar from this input size on (when stderr is a terminal)
-
-
-def fail(message: str, code: int = 1):
-    """Print one line on stderr and exit with ``code`` (no traceback)."""
-    click.echo(f"error: {message}", err=True)
-    sys.exit(code)
-
-
-def run_guarded(fn):
-    """Run ``fn`` mapping our exceptions to exit codes: input/output 1, usage 2, anything else 1."""
-    try:
-        return fn()
-    except UsageError as exc:
-        fail(str(exc), 2)
-    except (InputError, OutputError, ColossusError) as exc:
-        fail(str(exc), 1)
-    except MemoryError:
-        fail("out of memory", 1)
-    except KeyboardInterrupt:
-        fail("interrupted", 130)
-    except Exception as exc:  # never a traceback on user input; COLOSSUS_DEBUG=1 shows it
-        if os.environ.get("COLOSSUS_DEBUG"):
-            raise
-        fail(f"internal error ({type(exc).__name__}: {' '.join(str(exc).split())}); rerun with COLOSSUS_DEBUG=1 for details", 1)
 
 
 def _stage_line(rep) -> str:
@@ -120,6 +97,7 @@ def format_summary(result) -> str:
               help="Several inputs: import in N parallel processes.")
 @click.option("--scheduler", metavar="ADDRESS",
               help="Several inputs: run on a Dask cluster (tcp://host:8786, or local:N; needs colossus[dask]).")
+@maps_errors(input_status=1)
 def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, parts_mode, parts_threshold,
                min_part_faces, meshes, fps, source_up_axis, source_meters_per_unit, as_json, progress, jobs,
                scheduler):
@@ -148,9 +126,9 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
         source_up_axis=source_up_axis.upper() if source_up_axis else None,
         source_meters_per_unit=source_meters_per_unit,
     )
-    from .batch import is_glob
-    from .readers import USD_EXTENSIONS
-    one_file_out = out.lower().endswith(USD_EXTENSIONS) and not os.path.isdir(out)
+    from .engine import is_glob
+    from .stages.write import OUTPUT_EXTENSIONS
+    one_file_out = out.lower().endswith(OUTPUT_EXTENSIONS) and not os.path.isdir(out)
     if len(srcs) > 1 or ((os.path.isdir(srcs[0]) or is_glob(srcs[0])) and not one_file_out):
         return _import_many(srcs, out, settings, as_json, progress, jobs, scheduler)
     src = srcs[0]
@@ -171,14 +149,10 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
         line = f"importing [{'#' * done}{'-' * (24 - done)}] {i}/{n} {name}"
         click.echo(("\r" + line.ljust(60)) if tty else line, err=True, nl=not tty)
 
-    def go():
-        result = import_asset(src, out, settings, progress=on_stage)
-        on_stage(8, 8, "done")
-        if progress and tty:
-            click.echo("", err=True)
-        return result
-
-    result = run_guarded(go)
+    result = import_asset(src, out, settings, progress=on_stage)
+    on_stage(8, 8, "done")
+    if progress and tty:
+        click.echo("", err=True)
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2, default=float))
     else:
@@ -188,21 +162,16 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
 def _import_many(srcs, out, settings, as_json, progress, jobs, scheduler):
     """``colossus import A B ... -o DIR``: see :mod:`pipeline.batch`."""
     from .batch import format_import_rows, import_many
-    from .readers import USD_EXTENSIONS
+    from .stages.write import OUTPUT_EXTENSIONS
 
-    if os.path.isfile(out) or (not os.path.isdir(out) and out.lower().endswith(USD_EXTENSIONS)):
-        fail(f"-o {out}: with several inputs, -o is the output directory", 2)
-    try:
-        settings.check()
-    except UsageError as exc:
-        fail(str(exc), 2)
+    if os.path.isfile(out) or (not os.path.isdir(out) and out.lower().endswith(OUTPUT_EXTENSIONS)):
+        raise UsageError(f"-o {out}: with several inputs, -o is the output directory")
+    settings.check()
     show = sys.stderr.isatty() if progress is None else progress
     try:
         rows, interrupted = import_many(srcs, out, settings, jobs=jobs, scheduler=scheduler, progress=show)
-    except RuntimeError as exc:  # the scheduler cannot be reached, Dask missing
-        fail(str(exc), 2)
     except OSError as exc:
-        fail(f"-o {out}: {exc.strerror or exc}", 1)
+        raise OutputError(f"-o {out}: {exc.strerror or exc}") from None
     if as_json:
         doc = {"imports": rows}
         if interrupted:
@@ -213,6 +182,4 @@ def _import_many(srcs, out, settings, as_json, progress, jobs, scheduler):
     for r in rows:
         if r["ok"] is False:
             click.echo(f"error: {r['source']}: {r['error']}", err=True)
-    if interrupted:
-        sys.exit(130)
-    sys.exit(0 if all(r["ok"] for r in rows) else 1)
+    click.get_current_context().exit(130 if interrupted else 0 if all(r["ok"] for r in rows) else 1)

@@ -1,20 +1,14 @@
-"""The project's small exception hierarchy.
+"""The import stage's exceptions, under the project's one root :class:`ColossusError`.
 
 Library code raises these; only the command line turns them into messages and exit codes
-(:mod:`pipeline.cli`).  Every message is one line that names the file and the problem.
+(:func:`pipeline.cli.maps_errors`).  Every message is one line that names the file and the problem.
 """
 
 from __future__ import annotations
 
+from runtime.errors import ColossusError, one_line
 
-def one_line(e: BaseException, limit: int = 300) -> str:
-    """An exception's message on one line (whitespace collapsed, at most ``limit`` characters)."""
-    text = " ".join(str(e).split())
-    return text[:limit] or type(e).__name__
-
-
-class ColossusError(Exception):
-    """Base class of every error colossus raises on purpose."""
+__all__ = ["ColossusError", "one_line", "InputError", "OutputError", "UsageError"]
 
 
 class InputError(ColossusError):
@@ -25,7 +19,7 @@ class InputError(ColossusError):
 
     def __init__(self, path, problem: str):
         self.path = str(path) if path is not None else None
-        self.problem = " ".join(str(problem).split())  # force one line
+        self.problem = one_line(problem, limit=400)  # force one line, of readable length
         super().__init__(f"{self.path}: {self.problem}" if self.path else self.problem)
 
 

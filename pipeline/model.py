@@ -21,6 +21,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from runtime.schema import parents_first
+
 
 def _check(cond: bool, what: str, expected, actual) -> None:
     if not cond:
@@ -223,37 +225,10 @@ def skel_transforms(local: np.ndarray, parents: np.ndarray) -> np.ndarray:
     """
     local = np.asarray(local, dtype=np.float64)
     out = np.empty_like(local)
-    for j in parents_first_order(parents):
+    for j in parents_first(parents):
         p = parents[j]
         out[..., j, :, :] = local[..., j, :, :] if p < 0 else out[..., p, :, :] @ local[..., j, :, :]
     return out
-
-
-def parents_first_order(parents: np.ndarray) -> np.ndarray:
-    """Indices of joints ordered so every parent comes before its children.
-
-    Keeps the given order when it is already parents-first; otherwise each joint is placed
-    right after its not-yet-placed ancestors, in the original order otherwise.
-    Raises ``ValueError`` on a cycle.
-    """
-    parents = np.asarray(parents)
-    b = len(parents)
-    if b == 0 or np.all(parents < np.arange(b)):
-        return np.arange(b)
-    placed = np.zeros(b, dtype=bool)
-    order = []
-    for j in range(b):
-        chain = []
-        k = j
-        while k >= 0 and not placed[k]:
-            if k in chain:
-                raise ValueError("joint hierarchy has a cycle")
-            chain.append(k)
-            k = parents[k]
-        for c in reversed(chain):
-            placed[c] = True
-            order.append(c)
-    return np.array(order, dtype=np.int64)
 
 
 def skin_points(mesh: SkinnedMesh, skel: np.ndarray) -> np.ndarray:

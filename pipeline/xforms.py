@@ -1,12 +1,15 @@
 """Transform helpers: axis/unit conversion, TRS (de)composition, quaternions.
 
 All matrices are ``float64`` 4x4, column-vector convention (``p' = M @ p``).
-Quaternions are ``(..., 4)`` arrays ordered ``(w, x, y, z)`` (real part first, as ``Gf.Quat``).
+Quaternions are ``(..., 4)`` arrays ordered ``(x, y, z, w)`` (scalar last: pxr's numpy order and
+scipy's), converted and interpolated by scipy's ``Rotation`` (the runtime's numba kernels keep a
+hand-written GfSlerp port, since scipy cannot be called from compiled code).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 AXES = ("Y", "Z")
 
@@ -27,45 +30,26 @@ def axis_conversion(src_up: str, dst_up: str, src_mpu: float = 1.0, dst_mpu: flo
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """(..., 4) (w, x, y, z) quaternions -> (..., 3, 3) rotation matrices (normalises q)."""
+    """(..., 4) (x, y, z, w) quaternions -> (..., 3, 3) rotation matrices (q is normalised)."""
     q = np.asarray(q, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    out = np.empty(q.shape[:-1] + (3, 3))
-    out[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    out[..., 0, 1] = 2 * (x * y - z * w)
-    out[..., 0, 2] = 2 * (x * z + y * w)
-    out[..., 1, 0] = 2 * (x * y + z * w)
-    out[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    out[..., 1, 2] = 2 * (y * z - x * w)
-    out[..., 2, 0] = 2 * (x * z - y * w)
-    out[..., 2, 1] = 2 * (y * z + x * w)
-    out[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return out
+    return Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(q.shape[:-1] + (3, 3))
 
 
 def matrix_to_quat(r: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) rotation matrices -> (..., 4) unit quaternions (w, x, y, z), w >= 0."""
+    """(..., 3, 3) rotation matrices -> (..., 4) unit quaternions (x, y, z, w), w >= 0."""
     r = np.asarray(r, dtype=np.float64)
-    m00, m11, m22 = r[..., 0, 0], r[..., 1, 1], r[..., 2, 2]
-    # Shepperd's method: pick the largest of the four squared components for stability.
-    cand = np.stack([1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22], -1)
-    k = np.argmax(cand, axis=-1)
-    s = np.sqrt(np.maximum(np.take_along_axis(cand, k[..., None], -1)[..., 0], 1e-300)) * 2
-    q = np.empty(r.shape[:-2] + (4,))
-    w = r[..., 2, 1] - r[..., 1, 2]
-    x = r[..., 0, 2] - r[..., 2, 0]
-    y = r[..., 1, 0] - r[..., 0, 1]
-    a = r[..., 0, 1] + r[..., 1, 0]
-    b = r[..., 0, 2] + r[..., 2, 0]
-    c = r[..., 1, 2] + r[..., 2, 1]
-    q0 = np.stack([s / 4, w / s, x / s, y / s], -1)
-    q1 = np.stack([w / s, s / 4, a / s, b / s], -1)
-    q2 = np.stack([x / s, a / s, s / 4, c / s], -1)
-    q3 = np.stack([y / s, b / s, c / s, s / 4], -1)
-    q = np.choose(k[..., None], [q0, q1, q2, q3])
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    return np.where(q[..., :1] < 0, -q, q)
+    return Rotation.from_matrix(r.reshape(-1, 3, 3)).as_quat(canonical=True).reshape(r.shape[:-2] + (4,))
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Spherical linear interpolation along the shortest arc between (..., 4) (x, y, z, w)
+    quaternions by fractions ``u`` (...,) in [0, 1] (what glTF LINEAR and UsdSkel do)."""
+    q0 = np.asarray(q0, dtype=np.float64)
+    shape = q0.shape
+    r0 = Rotation.from_quat(q0.reshape(-1, 4))
+    step = (r0.inv() * Rotation.from_quat(np.asarray(q1, dtype=np.float64).reshape(-1, 4))).as_rotvec()
+    u = np.broadcast_to(np.asarray(u, dtype=np.float64), shape[:-1]).reshape(-1, 1)
+    return (r0 * Rotation.from_rotvec(step * u)).as_quat().reshape(shape)
 
 
 def compose_trs(t: np.ndarray, q: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -90,12 +74,9 @@ def decompose_trs(m: np.ndarray):
     rot = u @ vt
     det = np.linalg.det(rot)
     flip = det < 0
-    s = np.linalg.norm(a, axis=-2)  # column norms
     if np.any(flip):
         rot = rot.copy()
         rot[flip, :, 0] *= -1
-        s = s.copy()
-        s[flip, 0] *= -1
     # Re-derive the scale along the rotation's own axes: s_i = (R^T A)_ii
     s = np.einsum("...ji,...ji->...i", rot, a)
     return m[..., :3, 3].copy(), matrix_to_quat(rot), s

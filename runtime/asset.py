@@ -12,9 +12,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import schema
 from .errors import ColliderError
 
-PARTS = "colossus:parts:"
+PARTS = schema.PARTS_PREFIX
 
 
 @dataclass
@@ -118,7 +119,7 @@ def _find_prims(stage):
     meshes = [p for p in root.GetChildren() if p.GetTypeName() == "Mesh"]
     meshes = meshes or [p for p in stage.Traverse() if p.GetTypeName() == "Mesh" and
                         str(p.GetPath()).startswith(str(root.GetPath()) + "/")]
-    withparts = [m for m in meshes if m.GetAttribute(PARTS + "joints")]
+    withparts = [m for m in meshes if m.GetAttribute(schema.PARTS_JOINTS)]
     if not withparts:
         raise ColliderError(f"no Mesh with {PARTS}* attributes under {root.GetPath()}")
     mesh = withparts[0]
@@ -178,17 +179,6 @@ def _read_clip(prim, joint_index):
         name=prim.GetName(), path=where,
         tt=tt, vt=np.ascontiguousarray(vt[:, keep]), tr=tr, vr=np.ascontiguousarray(vr[:, keep]),
         ts=ts, vs=np.ascontiguousarray(vs[:, keep]), anim_to_skel=amap[keep], times=times)
-
-
-def _csr_vertices(triangles, face_offsets, faces):
-    """CSR of the distinct vertices of each part's faces."""
-    P = len(face_offsets) - 1
-    counts = np.diff(face_offsets)
-    part_of = np.repeat(np.arange(P), counts)
-    pv = np.stack([np.repeat(part_of, 3), triangles[faces].ravel()], 1)
-    pv = np.unique(pv, axis=0)  # sorted by part then vertex
-    offs = np.searchsorted(pv[:, 0], np.arange(P + 1))
-    return offs.astype(np.int64), np.ascontiguousarray(pv[:, 1]).astype(np.int64)
 
 
 #: Faces per chunk: the second culling level under the part spheres.
@@ -312,8 +302,7 @@ def _read(path) -> ColliderData:
     if not ok:
         raise ColliderError(f"{skel_prim.GetPath()} joint topology is invalid: {why}")
     parents = np.asarray(topo.GetParentIndices(), dtype=np.int64)
-    depth = np.array([j.count("/") for j in joints])
-    topo_order = np.argsort(depth, kind="stable").astype(np.int64)
+    topo_order = schema.parents_first(parents)
 
     bind = _mats(skel.GetBindTransformsAttr().Get(), f"{skel_prim.GetPath()}.bindTransforms")
     rest = _mats(skel.GetRestTransformsAttr().Get(), f"{skel_prim.GetPath()}.restTransforms")
@@ -379,16 +368,19 @@ def _read(path) -> ColliderData:
 
     # -- parts
     where = f"{mesh.GetPath()}.{PARTS}"
-    pj = [str(j) for j in _get(mesh, PARTS + "joints")]
+    values, errors = schema.read_parts(mesh)
+    if errors:
+        name, why = next(iter(errors.items()))
+        raise ColliderError(f"{mesh.GetPath()}.{name} is {why}")
+    pj = values["joints"]
     P = len(pj)
     missing = [j for j in pj if j not in joint_index]
     if missing:
         raise ColliderError(f"{where}joints names {missing[0]!r}, not a skeleton joint")
     part_joint = np.array([joint_index[j] for j in pj], dtype=np.int64)
-    centers = np.asarray(_get(mesh, PARTS + "centers"), dtype=np.float64).reshape(-1, 3)
-    radii = np.asarray(_get(mesh, PARTS + "radii"), dtype=np.float64).ravel()
-    offs = np.asarray(_get(mesh, PARTS + "faceOffsets"), dtype=np.int64).ravel()
-    faces = np.asarray(_get(mesh, PARTS + "faces"), dtype=np.int64).ravel()
+    centers = values["centers"].astype(np.float64)
+    radii = values["radii"].astype(np.float64)
+    offs, faces = values["face_offsets"], values["faces"]
     if len(centers) != P or len(radii) != P or len(offs) != P + 1:
         raise ColliderError(f"{where}*: {P} joints but {len(centers)} centers, {len(radii)} radii, "
                             f"{len(offs)} faceOffsets (want {P + 1})")
@@ -397,12 +389,10 @@ def _read(path) -> ColliderData:
     F = len(tris)
     if faces.size and (faces.min() < 0 or faces.max() >= F):
         raise ColliderError(f"{where}faces: face index out of range 0..{F - 1}")
-    face_part = np.full(F, -1, dtype=np.int64)
-    part_of = np.repeat(np.arange(P), np.diff(offs))
-    face_part[faces[::-1]] = part_of[::-1]  # first part wins
+    face_part = schema.face_owner(F, offs, faces)
     if (face_part < 0).any():
         raise ColliderError(f"{where}faces: {int((face_part < 0).sum())} faces are in no part")
-    vert_offsets, verts = _csr_vertices(tris, offs, faces)
+    vert_offsets, verts = schema.part_vertex_csr(tris, offs, faces, V)
     faces, chunk_offsets, part_chunks = _chunk_parts(pts.astype(np.float64), tris, offs, faces)
     pj = _part_joint_spheres(pts, ji, jw, geom_bind, inv_bind, vert_offsets, verts)
     convex = bool((jw >= 0).all() and np.allclose(jw.sum(1, dtype=np.float64), 1.0, rtol=0, atol=1e-6))

@@ -36,13 +36,6 @@ RINGS, AROUND, JOINTS, FRAMES = 250, 80, 40, 48
 LENGTH, RADIUS = 8.0, 0.35
 
 
-def _quat_axis(axis, angle):
-    """(..., 4) (x, y, z, w) quaternions for rotations by ``angle`` about unit ``axis``."""
-    angle = np.asarray(angle, dtype=np.float64)
-    s = np.sin(angle / 2)[..., None] * np.asarray(axis, dtype=np.float64)
-    return np.concatenate([s, np.cos(angle / 2)[..., None]], -1)
-
-
 def _geometry():
     theta = 2 * np.pi * np.arange(AROUND) / AROUND
     xs = np.linspace(0.0, LENGTH, RINGS)
@@ -68,7 +61,9 @@ def _geometry():
 def make_bench_asset(path):
     """Write the benchmark collider (see the module docstring) to ``path``."""
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+    from scipy.spatial.transform import Rotation  # benchmark data only (the runtime needs no scipy)
 
+    from . import schema
     from .collider import load_collider
 
     pts, tris = _geometry()
@@ -112,15 +107,9 @@ def make_bench_asset(path):
         tr[0] += [0.4 * np.sin(ph), 0.2 * np.sin(2 * ph), 0.0]
         bend = 0.12 * np.sin(ph - k * 0.5)
         twist = 0.05 * np.cos(ph - k * 0.3)
-        q = _quat_axis([0, 0, 1], bend)
-        q2 = _quat_axis([1, 0, 0], twist)
-        # q * q2 (xyzw)
-        x1, y1, z1, w1 = np.moveaxis(q, -1, 0)
-        x2, y2, z2, w2 = np.moveaxis(q2, -1, 0)
-        qq = np.stack([w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2, w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-                       w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2, w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2], 1)
+        qq = (Rotation.from_rotvec(bend[:, None] * [0, 0, 1]) * Rotation.from_rotvec(twist[:, None] * [1, 0, 0])).as_quat()
         ta.Set(Vt.Vec3fArray.FromNumpy(tr.astype(np.float32)), f)
-        ra.Set(Vt.QuatfArray([Gf.Quatf(float(v[3]), float(v[0]), float(v[1]), float(v[2])) for v in qq]), f)
+        ra.Set(Vt.QuatfArray.FromNumpy(qq.astype(np.float32)), f)  # (x, y, z, w), pxr's numpy order
         sa.Set(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * JOINTS), f)
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
 
@@ -140,18 +129,11 @@ def make_bench_asset(path):
     faces = np.argsort(owner, kind="stable")
     offsets = np.searchsorted(owner[faces], np.arange(JOINTS + 1))
     prim = mesh.GetPrim()
-    P = "colossus:parts:"
-    prim.CreateAttribute(P + "joints", Sdf.ValueTypeNames.TokenArray).Set(joints)
-    prim.CreateAttribute(P + "faceOffsets", Sdf.ValueTypeNames.IntArray).Set(Vt.IntArray(offsets.tolist()))
-    prim.CreateAttribute(P + "faces", Sdf.ValueTypeNames.IntArray).Set(Vt.IntArray(faces.tolist()))
-    prim.CreateAttribute(P + "centers", Sdf.ValueTypeNames.Float3Array).Set(
-        Vt.Vec3fArray.FromNumpy(np.zeros((JOINTS, 3), np.float32)))
-    radii = prim.CreateAttribute(P + "radii", Sdf.ValueTypeNames.FloatArray)
-    radii.Set(Vt.FloatArray([1e3] * JOINTS))
+    schema.write_parts(prim, list(joints), np.zeros((JOINTS, 3)), np.full(JOINTS, 1e3), offsets, faces)
     stage.GetRootLayer().Save()
 
     # fit the spheres in joint space over the bind pose and every frame
-    col = load_collider(path, verify=False)
+    col = load_collider(path)
     d = col.data
     local = {p: [] for p in range(JOINTS)}
     poses = [(None, 0.0, bind)] + [("wave", float(t), None) for t in col.frame_times("wave")]
@@ -171,8 +153,7 @@ def make_bench_asset(path):
         a = np.concatenate(local[p])
         centers[p] = (a.min(0) + a.max(0)) / 2
         rads[p] = np.linalg.norm(a - centers[p], axis=1).max() * 1.01 + 1e-4
-    prim.GetAttribute(P + "centers").Set(Vt.Vec3fArray.FromNumpy(centers.astype(np.float32)))
-    radii.Set(Vt.FloatArray(rads.tolist()))
+    schema.write_parts(prim, list(joints), centers, rads, offsets, faces)
     stage.GetRootLayer().Save()
     return path
 
@@ -200,7 +181,7 @@ def run_bench(path=None, repeat=50):
     if path is None:
         tmp = tempfile.TemporaryDirectory()
         path = make_bench_asset(os.path.join(tmp.name, "centipede.usda"))
-    col = load_collider(path, verify=False)
+    col = load_collider(path)
     d = col.data
     rng = np.random.default_rng(0)
     times = iter(rng.uniform(0, FRAMES - 1, 10 ** 6))

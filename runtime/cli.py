@@ -8,6 +8,8 @@ import os
 import click
 import numpy as np
 
+from pipeline.cli import maps_errors
+
 #: Largest number of GIF frames; longer clips are subsampled.
 MAX_FRAMES = 60
 
@@ -76,23 +78,20 @@ def render_gif(col, run, path, size=(480, 360), max_frames=MAX_FRAMES):
               help="Simulation steps per clip frame.")
 @click.option("--verify/--no-verify", default=False, show_default=True,
               help="Run the validators' error rules on the asset first.")
+@maps_errors(input_status=2)
 def play_cmd(asset, clip, output, radius, substeps, verify):
     """Drop a player sphere on ASSET's animated collider and record it as a GIF.
 
     Prints the largest penetration and the largest slip relative to the surface."""
-    from .errors import ColliderError
+    from validators import require_passing
+
     from .collider import load_collider
+    from .errors import ColliderError
     from .player import simulate
 
-    ctx = click.get_current_context()
-    try:
-        col = load_collider(asset, verify=verify)
-    except ColliderError as e:
-        click.echo(f"error: {e}", err=True)
-        ctx.exit(2)
+    col = load_collider(asset, verify=require_passing if verify else None)
     if not col.clips:
-        click.echo(f"error: {asset}: has no animation clips", err=True)
-        ctx.exit(2)
+        raise ColliderError(f"{asset}: has no animation clips")
     clip = clip or col.clips[0]
     if clip not in col.clips:
         raise click.UsageError(f"no clip {clip!r} in {asset}; clips: {', '.join(col.clips)}")

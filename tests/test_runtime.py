@@ -24,12 +24,12 @@ def limb_path(imported):
 
 @pytest.fixture(scope="session")
 def creature(creature_path):
-    return load_collider(creature_path, verify=False)
+    return load_collider(creature_path)
 
 
 @pytest.fixture(scope="session")
 def limb(limb_path):
-    return load_collider(limb_path, verify=False)
+    return load_collider(limb_path)
 
 
 @pytest.fixture(scope="session")
@@ -97,8 +97,11 @@ def test_load(creature, samples_meta):
 
 
 def test_load_verified(limb_path):
-    col = load_collider(limb_path)  # runs the validators' error rules when they are importable
+    from validators import require_passing
+    col = load_collider(limb_path, verify=require_passing)  # the validators' error rules, given by the caller
     assert col.clips == ["bend"]
+    with pytest.raises(TypeError):
+        load_collider(limb_path, verify=True)  # the runtime never imports the validators itself
 
 
 @pytest.mark.parametrize("content", [None, b"", b"#usda 1.0\n(\n garbage", b"\x00\x01binary junk" * 10,
@@ -108,14 +111,14 @@ def test_bad_files(tmp_path, content):
     if content is not None:
         p.write_bytes(content)
     with pytest.raises(ColliderError) as e:
-        load_collider(p, verify=False)
+        load_collider(p)
     msg = str(e.value)
     assert "\n" not in msg and str(p) in msg and len(msg) < 400
 
 
 def test_verify_rejects_broken_asset(tmp_path, limb_path):
-    """verify=True raises on an asset the error rules reject; verify=False still loads it."""
-    pytest.importorskip("validators")
+    """verify=require_passing raises on an asset the error rules reject; without it it still loads."""
+    from validators import require_passing
     stage = Usd.Stage.Open(str(limb_path))
     mesh = next(p for p in stage.Traverse() if p.GetTypeName() == "Mesh")
     radii = np.asarray(mesh.GetAttribute("colossus:parts:radii").Get()) * 0.3
@@ -123,8 +126,8 @@ def test_verify_rejects_broken_asset(tmp_path, limb_path):
     bad = tmp_path / "small-spheres.usda"
     stage.GetRootLayer().Export(str(bad))
     with pytest.raises(ColliderError, match="fails verification"):
-        load_collider(bad)
-    col = load_collider(bad, verify=False)
+        load_collider(bad, verify=require_passing)
+    col = load_collider(bad)
     pose = col.pose("bend", 10)
     # culling never changes an answer even though the asset spheres do not hold
     assert (pose.cull[:, 3] >= pose.spheres[:, 3]).all()
@@ -141,7 +144,7 @@ def test_verify_rejects_broken_asset(tmp_path, limb_path):
 @pytest.mark.parametrize("name", ["creature", "limb", "odd"])
 def test_points_match_usdskel(name, creature_path, limb_path, odd_path):
     path = {"creature": creature_path, "limb": limb_path, "odd": odd_path}[name]
-    col = load_collider(path, verify=False)
+    col = load_collider(path)
     ref = UsdSkelReference(path)
     pose = None
     for clip in col.clips:
@@ -156,7 +159,7 @@ def test_points_match_usdskel(name, creature_path, limb_path, odd_path):
 
 
 def test_points_match_naive_skin(odd_path):
-    col = load_collider(odd_path, verify=False)
+    col = load_collider(odd_path)
     d = col.data
     pose = col.pose("twist", 104.6)
     ref = naive_skin(d.rest_points, d.joint_indices, d.joint_weights, pose.skel_transforms,
@@ -165,7 +168,7 @@ def test_points_match_naive_skin(odd_path):
 
 
 def test_spheres_move_with_joints(odd_path, creature):
-    for col in (load_collider(odd_path, verify=False), creature):
+    for col in (load_collider(odd_path), creature):
         d = col.data
         for clip in col.clips:
             ft = col.frame_times(clip)

@@ -11,7 +11,7 @@ from runtime.player import simulate
 
 
 def test_player_lands_stands_and_is_carried(imported):
-    col = load_collider(imported("creature", "glb")[1], verify=False)
+    col = load_collider(imported("creature", "glb")[1])
     run = simulate(col, "walk")
     assert run.landed_at is not None
     first = int(np.argmax(run.grounded))

@@ -13,7 +13,8 @@ from xml.etree import ElementTree as ET
 import pytest
 from click.testing import CliRunner
 
-from pipeline.batch import expand_inputs, local_cluster, output_names
+from pipeline.batch import output_names
+from pipeline.engine import expand_inputs, local_cluster
 from usd_fixture import open_copy
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,7 +34,7 @@ def _scale_radii(src, dst, factor):
 def lib(tmp_path_factory, imported):
     """Imported samples, copies with shrunk (COL403) and grown (COL404) part radii, a few
     generated 3-clip assets, a corrupt file, in two directories."""
-    from pipeline.batch import make_library
+    from validators.bench import make_library
     d = tmp_path_factory.mktemp("scale")
     (d / "b").mkdir()
     for name, ext in (("creature", "glb"), ("limb", "glb"), ("limb_flipped", "glb"), ("creature", "fbx")):
@@ -50,7 +51,7 @@ def lib(tmp_path_factory, imported):
 @pytest.fixture(scope="module")
 def cluster():
     """A 2-worker LocalCluster whose workers die (os._exit) on assets named *crashme* always and
-    on *crashonce* the first time (the test hook in ``pipeline.batch.crash_hook``)."""
+    on *crashonce* the first time (the test hook in ``pipeline.engine.crash_hook``)."""
     c = local_cluster(2, env={"COLOSSUS_TEST_CRASH": "crashme", "COLOSSUS_TEST_CRASH_ONCE": "crashonce"})
     yield c
     c.close()
@@ -241,7 +242,7 @@ def test_import_many_output_must_be_a_directory(tmp_path):
 
 def test_unreachable_scheduler_exit_2(lib, monkeypatch):
     t0 = time.perf_counter()
-    monkeypatch.setattr("pipeline.batch.CONNECT_TIMEOUT", 2.0)
+    monkeypatch.setattr("pipeline.engine.CONNECT_TIMEOUT", 2.0)
     r = validate(lib / "limb-glb.usda", "--scheduler", "tcp://127.0.0.1:9")
     assert r.exit_code == 2 and "cannot reach the Dask scheduler" in r.stderr
     assert time.perf_counter() - t0 < 20

@@ -19,6 +19,7 @@ import hashlib
 import math
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdSkel, Vt
 
 JOINTS = ["root", "root/mid", "root/mid/tip"]
@@ -26,31 +27,23 @@ PARENTS = np.array([-1, 0, 1])
 
 
 # ------------------------------------------------------------------------- small helpers
-def quat_matrix(q):
-    """(..., 4) (w, x, y, z) -> (..., 3, 3)."""
-    q = np.asarray(q, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
-
-
 def trs(t, q, s):
+    """Translation (..., 3), (x, y, z, w) quaternion (..., 4), scale (..., 3) -> (..., 4, 4) T R S."""
     t = np.asarray(t, dtype=np.float64)
     m = np.zeros(t.shape[:-1] + (4, 4))
-    m[..., :3, :3] = quat_matrix(q) * np.asarray(s, dtype=np.float64)[..., None, :]
+    q = np.asarray(q, dtype=np.float64)
+    rot = Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(q.shape[:-1] + (3, 3))
+    m[..., :3, :3] = rot * np.asarray(s, dtype=np.float64)[..., None, :]
     m[..., :3, 3] = t
     m[..., 3, 3] = 1
     return m
 
 
 def axis_quat(axis, angle):
+    """(..., 4) (x, y, z, w) quaternions of rotations by ``angle`` (...) about unit ``axis``."""
     angle = np.asarray(angle, dtype=np.float64)
-    a = np.asarray(axis, dtype=np.float64)
-    return np.concatenate([np.cos(angle / 2)[..., None], np.sin(angle / 2)[..., None] * a], -1)
+    rv = angle.reshape(-1, 1) * np.asarray(axis, dtype=np.float64)
+    return Rotation.from_rotvec(rv).as_quat().reshape(angle.shape + (4,))
 
 
 def compose(local, parents=PARENTS):
@@ -131,7 +124,7 @@ def clip_locals(name, frames):
     t[:, 1:, 1] = 1.0
     s = np.ones((frames, 3, 3))
     q = np.zeros((frames, 3, 4))
-    q[..., 0] = 1
+    q[..., 3] = 1
     if name == "bend":
         a = 0.8 * np.sin(np.pi * f / max(frames - 1, 1))
         q[:, 1] = axis_quat([0, 0, 1], a)
@@ -263,7 +256,7 @@ def build_test_stage(*, name="Tube", rings=20, segments=20, max_influences=4,
         ta, ra, sa = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr(), anim.CreateScalesAttr()
         for i, tc in enumerate(times):
             ta.Set(Vt.Vec3fArray.FromNumpy(t[i].astype(np.float32)), tc)
-            ra.Set(Vt.QuatfArray([Gf.Quatf(float(a[0]), Gf.Vec3f(*map(float, a[1:]))) for a in q[i]]), tc)
+            ra.Set(Vt.QuatfArray.FromNumpy(np.ascontiguousarray(q[i], dtype=np.float32)), tc)
             sa.Set(Vt.Vec3hArray([Gf.Vec3h(*map(float, v)) for v in s[i]]), tc)
     if path:
         stage.GetRootLayer().Save()

@@ -21,4 +21,13 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
 
 check_asset.__doc__ = """Run every selected rule on one asset (see :func:`validators.runner.check_asset`)."""
 
-__all__ = ["check_asset", "AssetReport", "Finding", "RuleSelector", "all_rules", "get_rule"]
+
+def require_passing(path):
+    from .runner import require_passing as _require
+    return _require(path)
+
+
+require_passing.__doc__ = """Raise ``runtime.ColliderError`` when ``path`` has an error finding (see
+:func:`validators.runner.require_passing`); the verifier for ``runtime.load_collider(path, verify=...)``."""
+
+__all__ = ["check_asset", "require_passing", "AssetReport", "Finding", "RuleSelector", "all_rules", "get_rule"]

@@ -16,23 +16,21 @@ from functools import cached_property
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel
 
+from runtime import schema
+
 from . import tolerances as tol
 
 CLIP_ATTRS = ("translations", "rotations", "scales")
 
 
 def _mats(value) -> np.ndarray | None:
-    """A ``VtMatrix4dArray`` (row-vector) -> ``(b, 4, 4)`` float64 column-vector, or None."""
-    if value is None:
-        return None
-    a = np.array(value, dtype=np.float64)
-    if a.ndim != 3 or a.shape[1:] != (4, 4):
-        return None
-    return np.ascontiguousarray(a.transpose(0, 2, 1))
+    """A ``VtMatrix4dArray`` -> ``(b, 4, 4)`` float64 column-vector (:mod:`runtime.schema`), or None."""
+    m = schema.matrices_from_usd(value)
+    return m if m is not None and m.ndim == 3 else None
 
 
 def _mat(value) -> np.ndarray:
-    return np.ascontiguousarray(np.array(value, dtype=np.float64).T)
+    return schema.matrices_from_usd(value)
 
 
 @dataclass
@@ -122,7 +120,7 @@ class LoadedAsset:
         skels = [p for p in self.skeletons if under(p)]
         self.skeleton = skels[0] if skels else None
         meshes = [p for p in self.meshes if under(p)]
-        named = [p for p in meshes if p.GetName() == "Collider"]
+        named = [p for p in meshes if p.GetName() == schema.COLLIDER_NAME]
         self.mesh = named[0] if named else (meshes[0] if meshes else None)
 
     def _read_skeleton(self):
@@ -210,30 +208,9 @@ class LoadedAsset:
         self.parts_attr_errors = {}
         if self.mesh is None:
             return
-        spec = {
-            "colossus:parts:joints": ("part_joints", Sdf.ValueTypeNames.TokenArray),
-            "colossus:parts:centers": ("part_centers", Sdf.ValueTypeNames.Float3Array),
-            "colossus:parts:radii": ("part_radii", Sdf.ValueTypeNames.FloatArray),
-            "colossus:parts:faceOffsets": ("part_offsets", Sdf.ValueTypeNames.IntArray),
-            "colossus:parts:faces": ("part_faces", Sdf.ValueTypeNames.IntArray),
-        }
-        for name, (field, typ) in spec.items():
-            attr = self.mesh.GetAttribute(name)
-            if not attr or not attr.HasAuthoredValue():
-                self.parts_attr_errors[name] = "missing"
-                continue
-            if attr.GetTypeName() != typ:
-                self.parts_attr_errors[name] = f"type {attr.GetTypeName()} (expected {typ})"
-                continue
-            v = attr.Get()
-            if field == "part_joints":
-                setattr(self, field, [str(t) for t in v])
-            elif field == "part_centers":
-                setattr(self, field, np.array(v, dtype=np.float32).reshape(-1, 3))
-            elif field == "part_radii":
-                setattr(self, field, np.array(v, dtype=np.float32))
-            else:
-                setattr(self, field, np.array(v, dtype=np.int64))
+        values, self.parts_attr_errors = schema.read_parts(self.mesh)
+        self.part_joints, self.part_centers, self.part_radii = values["joints"], values["centers"], values["radii"]
+        self.part_offsets, self.part_faces = values["face_offsets"], values["faces"]
 
     def _read_clips(self):
         self.clips = []
@@ -288,15 +265,9 @@ class LoadedAsset:
 
     @cached_property
     def part_vertices(self):
-        """CSR ``(offsets (P+1,), vertices)`` of the distinct vertices of each part's faces."""
-        P, n = len(self.part_joints), self.n
-        counts = np.diff(self.part_offsets)
-        pid = np.repeat(np.arange(P, dtype=np.int64), counts)
-        verts = self.tris[self.part_faces].astype(np.int64)  # (sum, 3)
-        key = np.unique(np.repeat(pid, 3) * max(n, 1) + verts.ravel())
-        part_of, vert = key // max(n, 1), key % max(n, 1)
-        offsets = np.searchsorted(part_of, np.arange(P + 1)).astype(np.int64)
-        return offsets, vert.astype(np.int32)
+        """CSR ``(offsets (P+1,) int64, vertices int32)`` of the distinct vertices of each part's faces."""
+        offsets, verts = schema.part_vertex_csr(self.tris, self.part_offsets, self.part_faces, self.n)
+        return offsets, verts.astype(np.int32)
 
     def anim_local(self, clip: Clip, times) -> np.ndarray:
         """(f, b, 4, 4) joint-local transforms of ``clip`` at ``times`` in skeleton joint order,
@@ -329,7 +300,7 @@ class LoadedAsset:
     def skel_transforms(self, local: np.ndarray) -> np.ndarray:
         """Compose ``(f, b, 4, 4)`` joint-local transforms into skeleton space (parents first)."""
         out = np.empty_like(local)
-        for j in parents_first(self.parents):
+        for j in schema.parents_first(self.parents):
             p = self.parents[j]
             out[:, j] = local[:, j] if p < 0 else out[:, p] @ local[:, j]
         return out
@@ -444,20 +415,3 @@ class LoadedAsset:
             if not ok:
                 return ok, why
         return True, ""
-
-
-def parents_first(parents: np.ndarray) -> list:
-    """Joint indices ordered so every parent precedes its children (stable); cycles dropped."""
-    parents = np.asarray(parents)
-    b = len(parents)
-    depth = np.full(b, -1, dtype=np.int64)
-    for j in range(b):
-        chain, k = [], j
-        while k >= 0 and depth[k] < 0 and len(chain) <= b:
-            chain.append(k)
-            k = parents[k]
-        d = -1 if k < 0 else depth[k]
-        for c in reversed(chain):
-            d += 1
-            depth[c] = d
-    return [int(j) for j in np.argsort(depth, kind="stable")]

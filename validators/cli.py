@@ -10,6 +10,8 @@ import sys
 
 import click
 
+from pipeline.cli import maps_errors
+
 
 def _codes(values):
     out = []
@@ -56,6 +58,7 @@ def _list_rules(ctx, param, value):
 @click.option("-v", "--verbose", is_flag=True, help="Text format: list every finding, not only the worst.")
 @click.option("--list-rules", is_flag=True, expose_value=False, is_eager=True, callback=_list_rules,
               help="Print the rule catalog and exit.")
+@maps_errors(input_status=2)
 def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, subframes, slack_ratio, jobs,
                  scheduler, split_above, progress, verbose):
     """Check collider assets: PATHS are files, directories (searched for *.usd, *.usda,
@@ -63,8 +66,8 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
     2 a path unreadable or usage, 130 interrupted (the report so far is still written, marked
     INCOMPLETE)."""
     from .registry import RuleSelector
-    from .parallel import check_many, render as render_report
-    from .report import write_atomic
+    from .parallel import check_many
+    from .report import render as render_report, write_atomic
 
     if not paths:
         raise click.UsageError("give at least one asset file or directory")
@@ -88,32 +91,23 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
 
     split_bytes = _size(split_above)
     show = sys.stderr.isatty() if progress is None else progress
-    try:
-        res = check_many(paths, jobs=jobs, scheduler=scheduler, progress=show, split_bytes=split_bytes,
-                         select=sel, ignore=ign, severities=sev, max_influences=max_influences,
-                         subframes=subframes, slack_ratio=slack_ratio)
-    except RuntimeError as e:  # the scheduler cannot be reached, Dask missing
-        click.echo(f"colossus validate: {e}", err=True)
-        sys.exit(2)
+    res = check_many(paths, jobs=jobs, scheduler=scheduler, progress=show, split_bytes=split_bytes,
+                     select=sel, ignore=ign, severities=sev, max_influences=max_influences,
+                     subframes=subframes, slack_ratio=slack_ratio)
     reports, missing = res.reports, res.missing
     for m in missing:
-        click.echo(f"colossus validate: {m}: no such file or directory", err=True)
+        click.echo(f"error: {m}: no such file or directory", err=True)
     if res.interrupted:
-        click.echo(f"colossus validate: interrupted; {len(res.unchecked)} asset(s) not checked, "
+        click.echo(f"error: interrupted; {len(res.unchecked)} asset(s) not checked, "
                    "the report is INCOMPLETE", err=True)
-        if fmt not in ("text", "json", "junit", "html"):
-            click.echo(f"colossus validate: the {fmt} report does not say it is incomplete", err=True)
     text = render_report(fmt, reports, verbose=verbose, unchecked=res.unchecked if res.interrupted else None)
     if output:
         write_atomic(output, text)
     else:
         click.echo(text, nl=False)
-    if res.interrupted:
-        sys.exit(130)
     unreadable = bool(missing) or any(f.code == "COL003" for r in reports for f in r.findings)
-    if unreadable:
-        sys.exit(2)
-    sys.exit(0 if all(r.passed for r in reports) else 1)
+    status = 130 if res.interrupted else 2 if unreadable else 0 if all(r.passed for r in reports) else 1
+    click.get_current_context().exit(status)
 
 
 def _size(text):

@@ -4,24 +4,22 @@
 from __future__ import annotations
 
 import json
-import sys
 
 import click
+
+from pipeline.cli import maps_errors
 
 
 @click.command("inspect")
 @click.argument("path", type=click.Path(dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as one JSON object.")
+@maps_errors(input_status=2)
 def inspect_cmd(path, as_json):
     """Print a readable summary of the collider asset PATH: stage metadata, counts, the joint
     tree, clips (frames, seconds), parts (joint, faces, radius) and provenance."""
-    from .summary import AssetError, format_summary, open_asset, summarize
+    from .summary import format_summary, open_asset, summarize
 
-    try:
-        s = summarize(open_asset(path))
-    except AssetError as e:
-        click.echo(f"colossus inspect: {e}", err=True)
-        sys.exit(2)
+    s = summarize(open_asset(path))
     if as_json:
         click.echo(json.dumps(s, indent=2))
     else:

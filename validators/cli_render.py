@@ -1,16 +1,17 @@
 """``colossus render PATH -o FILE.png|.gif``: a picture of the collider and its part spheres (thin
 layer over :mod:`validators.render`).
 
-Exit status: 0 written; 2 the asset cannot be read or drawn, an unknown clip, or usage (one
-line on stderr, no traceback); 1 the picture could not be made on this machine (no OpenGL
-context: VTK's own message).
+Exit status (the contract): 0 written; 2 the asset cannot be read or drawn, an unknown clip,
+usage, or this machine cannot draw (no OpenGL context: VTK's own message); one line on stderr,
+no traceback.
 """
 
 from __future__ import annotations
 
-import sys
-
 import click
+
+from pipeline.cli import maps_errors
+from runtime.errors import ColossusError, one_line
 
 SUFFIXES = (".png", ".gif")
 
@@ -26,12 +27,13 @@ SUFFIXES = (".png", ".gif")
               help="Image size in pixels [800x600 for .png, 480x360 for .gif].")
 @click.option("--max-frames", type=click.IntRange(min=1, max=1000), default=60, show_default=True,
               help=".gif: frames are subsampled evenly to at most this many.")
+@maps_errors(input_status=2)
 def render_cmd(path, output, clip, time_, size, max_frames):
     """Render the collision mesh of PATH with every part's sphere drawn translucent in the part's
     colour.  A part whose sphere does not hold its vertices on the pose drawn is red, and its
     offending vertices are marked in yellow."""
     from .render import RenderError, parse_size, render_gif, render_png
-    from .summary import AssetError, open_asset
+    from .summary import open_asset
 
     suffix = output[output.rfind("."):].lower() if "." in output else ""
     if suffix not in SUFFIXES:
@@ -56,13 +58,10 @@ def render_cmd(path, output, clip, time_, size, max_frames):
             ps = render_gif(asset, output, clip=clip, size=wh, max_frames=max_frames)
             what = f"{ps[0].clip}, {len(ps)} frames"
             failing = sum(bool(p.failing.any()) for p in ps)
-    except (AssetError, RenderError) as e:
-        click.echo(f"colossus render: {e}", err=True)
-        sys.exit(2)
-    except Exception as e:  # the renderer itself (no OpenGL context, ...)
-        from .summary import one_line
-        click.echo(f"colossus render: could not draw on this machine: {one_line(e)}", err=True)
-        sys.exit(2)  # the contract's render statuses are 0 and 2
+    except ColossusError:
+        raise
+    except Exception as e:  # the renderer itself (no OpenGL context, ...): the contract's status 2
+        raise RenderError(f"could not draw on this machine: {one_line(e)}") from None
     unit = "frame" if suffix == ".gif" else "part"
     note = f" ({failing} {unit}{'s' if failing > 1 else ''} with a failing sphere)" if failing else ""
     click.echo(f"colossus render {path} -> {output} [{what}]{note}")

@@ -114,3 +114,10 @@ class AssetReport:
 
     def sort(self) -> None:
         self.findings.sort(key=lambda f: (SEVERITY_RANK.get(f.severity, 9), f.code, -f.sort_key))
+
+
+def summary_line(reports) -> str:
+    """``N assets, P passed, F failed`` for a list of :class:`AssetReport`."""
+    n = len(reports)
+    passed = sum(r.passed for r in reports)
+    return f"{n} assets, {passed} passed, {n - passed} failed"

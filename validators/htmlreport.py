@@ -18,7 +18,7 @@ import base64
 import html
 import io
 
-from .findings import SEVERITY_RANK
+from .findings import SEVERITY_RANK, summary_line
 
 #: Codes whose findings say the file could not be read at all (no pictures then).
 UNREADABLE = ("COL001", "COL003")
@@ -169,12 +169,16 @@ def _section(i, r, pictures) -> str:
     return "\n".join(out)
 
 
-def format_html(reports, pictures: bool = True) -> str:
-    """One self-contained HTML page for a run (``pictures=False``: findings only, no rendering)."""
-    from .report import summary_line
-
+def format_html(reports, pictures: bool = True, unchecked=None) -> str:
+    """One self-contained HTML page for a run (``pictures=False``: findings only, no rendering);
+    ``unchecked`` (paths, given when the run was interrupted) puts an INCOMPLETE banner on top."""
     body = [f"<h1>colossus validate</h1><p class=\"summary\">{_e(summary_line(reports))}</p>"]
     body += [_section(i, r, pictures) for i, r in enumerate(reports)]
+    if unchecked is not None:
+        items = "".join(f"<li>{_e(p)}</li>" for p in unchecked)
+        body.insert(0, f'<div class="incomplete" style="border:2px solid #c00;padding:.5em;margin:.5em 0">'
+                       f"<strong>INCOMPLETE</strong>: the run was interrupted; {len(unchecked)} asset(s) not checked"
+                       f"<ul>{items}</ul></div>")
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
             f"<title>colossus validate: {_e(summary_line(reports))}</title><style>{CSS}</style></head>\n<body>\n"

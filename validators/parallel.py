@@ -1,7 +1,7 @@
 """``colossus validate`` on many assets: ``--jobs N`` processes or ``--scheduler`` (Dask), with
 very large assets split into one frame-proof task per clip.
 
-The distribution machinery (backends, retries, Ctrl-C, progress) is :mod:`pipeline.batch`;
+The distribution machinery (backends, retries, Ctrl-C, progress) is :mod:`pipeline.engine`;
 this module holds the validator's work units and the merge:
 
 ================= ===========================================================================
@@ -19,7 +19,7 @@ Reports come back in any order and are put in input order (directories expanded 
 every format (text, JSON, JUnit) is the same as a ``--jobs 1`` run, timing fields aside
 (:func:`comparable`).  A unit whose worker dies is retried once, alone; if it dies again the
 asset gets a ``COL001`` finding ("checking the asset crashed") and every other asset keeps its
-result.  Ctrl-C returns what finished; :func:`render` marks such a report incomplete.
+result.  Ctrl-C returns what finished; :func:`validators.report.render` marks such a report incomplete.
 """
 
 from __future__ import annotations
@@ -27,11 +27,11 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import dataclass, field
-from xml.etree import ElementTree as ET
 
-from pipeline.batch import Engine, Progress, Task, crash_hook, expand_inputs, make_backend
+from pipeline.engine import Engine, Progress, Task, crash_hook, expand_inputs, make_backend
+from pipeline.readers import USD_EXTENSIONS
 
-from .runner import USD_SUFFIXES, _crash_report, check_asset
+from .runner import _crash_report, check_asset
 
 #: Assets at least this large (bytes on disk) are split by clip across workers.
 SPLIT_BYTES = 64 * 2**20
@@ -104,7 +104,7 @@ def check_many(paths, jobs=1, scheduler=None, progress=False, split_bytes=SPLIT_
     frame proof split by clip (``None``: never; only with ``jobs > 1`` or a scheduler);
     ``kw``: :func:`validators.runner.check_asset` arguments.
     """
-    assets, missing = expand_inputs(paths, USD_SUFFIXES)
+    assets, missing = expand_inputs(paths, USD_EXTENSIONS)
     backend = make_backend(jobs, scheduler)
     parallel = backend.workers > 1 or scheduler is not None
     split = parallel and split_bytes is not None and _should_split(kw)
@@ -177,48 +177,6 @@ def check_many(paths, jobs=1, scheduler=None, progress=False, split_bytes=SPLIT_
 
 
 # ------------------------------------------------------------------------------ reports
-def render(fmt, reports, verbose=False, unchecked=None) -> str:
-    """The report in ``fmt`` (``validators.report.FORMATS``); with ``unchecked`` (a list,
-    possibly empty, given when the run was interrupted) marked INCOMPLETE: text gets a last
-    block, JSON gets ``"incomplete": true`` and ``"not_checked": [paths]``, JUnit gets
-    ``incomplete="true"`` on ``<testsuites>`` and a ``not checked (interrupted)`` suite with a
-    skipped case per path, HTML gets a banner at the top of the page."""
-    from .report import FORMATS, format_text
-    text = format_text(reports, verbose=verbose) if fmt == "text" else FORMATS[fmt](reports)
-    if unchecked is None:
-        return text
-    if fmt == "text":
-        lines = [f"INCOMPLETE: interrupted; {len(unchecked)} asset(s) not checked"]
-        lines += [f"  not checked: {p}" for p in unchecked]
-        return text + "\n".join(lines) + "\n"
-    if fmt == "json":
-        data = json.loads(text)
-        data["incomplete"] = True
-        data["not_checked"] = list(unchecked)
-        return json.dumps(data, indent=2) + "\n"
-    if fmt == "junit":
-        root = ET.fromstring(text.split("\n", 1)[1])
-        root.set("incomplete", "true")
-        suite = ET.SubElement(root, "testsuite", name="not checked (interrupted)", tests=str(len(unchecked)),
-                              failures="0", errors="0", skipped=str(len(unchecked)), time="0")
-        for p in unchecked:
-            case = ET.SubElement(suite, "testcase", classname=p, name="not checked", time="0")
-            ET.SubElement(case, "skipped", message="the run was interrupted before this asset was checked")
-        root.set("tests", str(int(root.get("tests", 0)) + len(unchecked)))
-        root.set("skipped", str(int(root.get("skipped", 0)) + len(unchecked)))
-        ET.indent(root)
-        return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
-    if fmt == "html" and "<body" in text:
-        import html
-        at = text.index(">", text.index("<body")) + 1
-        items = "".join(f"<li>{html.escape(p)}</li>" for p in unchecked)
-        banner = (f'<div class="incomplete" style="border:2px solid #c00;padding:.5em;margin:.5em 0">'
-                  f"<strong>INCOMPLETE</strong>: the run was interrupted; {len(unchecked)} asset(s) not checked"
-                  f"<ul>{items}</ul></div>")
-        return text[:at] + banner + text[at:]
-    return text  # another format: the caller says it on stderr
-
-
 TIMING_KEYS = ("seconds", "load_seconds")
 
 
@@ -234,4 +192,4 @@ def comparable(reports) -> list:
     return out
 
 
-__all__ = ["check_many", "render", "comparable", "BatchResult", "SPLIT_BYTES"]
+__all__ = ["check_many", "comparable", "BatchResult", "SPLIT_BYTES"]

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from runtime.errors import ColossusError
+
 from . import frameproof as fp
 from . import tolerances as tol
 
@@ -40,7 +42,7 @@ BACKGROUND = (0.97, 0.97, 0.96)
 SPHERE_OPACITY = 0.18
 
 
-class RenderError(Exception):
+class RenderError(ColossusError):
     """The asset cannot be drawn (what it lacks), or the clip/time asked for does not exist.
     ``str()`` is one line."""
 

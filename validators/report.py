@@ -8,18 +8,26 @@ import os
 import tempfile
 from xml.etree import ElementTree as ET
 
-from .findings import SEVERITY_RANK
+from .findings import SEVERITY_RANK, summary_line
+from .htmlreport import format_html
 from .registry import all_rules
 
-
-def summary_line(reports) -> str:
-    n = len(reports)
-    passed = sum(r.passed for r in reports)
-    return f"{n} assets, {passed} passed, {n - passed} failed"
+__all__ = ["FORMATS", "render", "summary_line", "format_text", "format_json", "format_junit", "format_html",
+           "write_atomic"]
 
 
-def format_text(reports, verbose: bool = False) -> str:
-    """Grouped by asset; within an asset rules with errors first, each with its worst location."""
+def render(fmt: str, reports, verbose: bool = False, unchecked=None) -> str:
+    """The report of ``reports`` in ``fmt`` (a key of :data:`FORMATS`).  ``unchecked``: the paths
+    not checked because the run was interrupted (a list, possibly empty; None for a complete run):
+    every format then says the report is INCOMPLETE and lists them."""
+    if fmt == "text":
+        return format_text(reports, verbose=verbose, unchecked=unchecked)
+    return FORMATS[fmt](reports, unchecked=unchecked)
+
+
+def format_text(reports, verbose: bool = False, unchecked=None) -> str:
+    """Grouped by asset; within an asset rules with errors first, each with its worst location;
+    an interrupted run ends with ``INCOMPLETE: ...`` and the paths not checked."""
     out = []
     for r in reports:
         errors = sum(f.severity == "error" for f in r.findings)
@@ -51,12 +59,19 @@ def format_text(reports, verbose: bool = False) -> str:
         for why, codes in by_reason.items():
             out.append(f"  skipped {', '.join(codes)}: {why}")
     out.append(summary_line(reports))
+    if unchecked is not None:
+        out.append(f"INCOMPLETE: interrupted; {len(unchecked)} asset(s) not checked")
+        out += [f"  not checked: {p}" for p in unchecked]
     return "\n".join(out) + "\n"
 
 
-def format_json(reports) -> str:
-    """The contract's shape: ``{"assets": [{"path", "passed", "findings": [...], "stats"}]}``."""
-    return json.dumps({"assets": [r.to_dict() for r in reports]}, indent=2, default=_jsonable) + "\n"
+def format_json(reports, unchecked=None) -> str:
+    """The contract's shape: ``{"assets": [{"path", "passed", "findings": [...], "stats"}]}``, plus
+    ``"incomplete": true, "not_checked": [paths]`` for an interrupted run."""
+    doc = {"assets": [r.to_dict() for r in reports]}
+    if unchecked is not None:
+        doc.update(incomplete=True, not_checked=list(unchecked))
+    return json.dumps(doc, indent=2, default=_jsonable) + "\n"
 
 
 def _jsonable(o):
@@ -66,11 +81,12 @@ def _jsonable(o):
         return str(o)
 
 
-def format_junit(reports) -> str:
+def format_junit(reports, unchecked=None) -> str:
     """JUnit XML: one ``testsuite`` per asset, one ``testcase`` per rule that ran or was skipped.
     Error findings are ``<failure>``; a crashed rule (COL002) or an unreadable asset is an
     ``<error>``; warnings and info go to ``<system-out>``; a rule that could not run is
-    ``<skipped>``."""
+    ``<skipped>``.  An interrupted run has ``incomplete="true"`` on ``<testsuites>`` and a
+    ``not checked (interrupted)`` suite with a skipped case per path not checked."""
     suites = ET.Element("testsuites", name="colossus validate")
     rules = {r.code: r for r in all_rules()}
     t_tests = t_fail = t_err = t_skip = 0
@@ -109,18 +125,21 @@ def format_junit(reports) -> str:
         suite.set("skipped", str(skips))
         suite.set("time", str(rep.stats.get("seconds", 0)))
         t_tests, t_fail, t_err, t_skip = t_tests + tests, t_fail + fails, t_err + errs, t_skip + skips
+    if unchecked is not None:
+        suite = ET.SubElement(suites, "testsuite", name="not checked (interrupted)", tests=str(len(unchecked)),
+                              failures="0", errors="0", skipped=str(len(unchecked)), time="0")
+        for p in unchecked:
+            case = ET.SubElement(suite, "testcase", classname=p, name="not checked", time="0")
+            ET.SubElement(case, "skipped", message="the run was interrupted before this asset was checked")
+        t_tests, t_skip = t_tests + len(unchecked), t_skip + len(unchecked)
     suites.set("tests", str(t_tests))
     suites.set("failures", str(t_fail))
     suites.set("errors", str(t_err))
     suites.set("skipped", str(t_skip))
+    if unchecked is not None:
+        suites.set("incomplete", "true")
     ET.indent(suites)
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(suites, encoding="unicode") + "\n"
-
-
-def format_html(reports) -> str:
-    """One self-contained HTML page with pictures (:mod:`validators.htmlreport`)."""
-    from .htmlreport import format_html as _html
-    return _html(reports)
 
 
 FORMATS = {"text": format_text, "json": format_json, "junit": format_junit, "html": format_html}

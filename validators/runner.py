@@ -16,8 +16,6 @@ from .asset import LoadedAsset, open_stage
 from .findings import SEVERITIES, AssetReport, Finding
 from .registry import RuleSelector, get_rule
 
-USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
-
 DEFAULT_OPTIONS = {
     "max_influences": tol.MAX_INFLUENCES,
     "subframes": 0,
@@ -150,6 +148,21 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
                           f"[{Path(tb.filename).name}:{tb.lineno}]", validator=rule.code)
     report.stats = _stats(asset, ctx, t_load, time.perf_counter() - t0)
     report.sort()
+    return report
+
+
+def require_passing(path) -> AssetReport:
+    """Run every rule on ``path`` and raise :class:`runtime.ColliderError` (one line listing the
+    first error findings) when any has severity error; the verifier game code hands to
+    ``runtime.load_collider(path, verify=require_passing)``.  Returns the report otherwise."""
+    from runtime.errors import ColliderError
+
+    report = check_asset(path)
+    errs = [f for f in report.findings if f.severity == "error"]
+    if errs:
+        listing = "; ".join(f"{f.code} {f.message}" for f in errs[:5])
+        more = f" (+{len(errs) - 5} more)" if len(errs) > 5 else ""
+        raise ColliderError(one_line(f"{path}: fails verification: {listing}{more}", limit=1000))
     return report
 
 

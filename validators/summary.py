@@ -12,26 +12,18 @@ the joint tree, clips, parts, provenance) from a :class:`validators.asset.Loaded
 from __future__ import annotations
 
 import os
-import re
 
 import numpy as np
 from pxr import UsdGeom
 
+from runtime import schema
+from runtime.errors import ColossusError, one_line
+
 from .asset import LoadedAsset, open_stage
 
 
-class AssetError(Exception):
+class AssetError(ColossusError):
     """The asset cannot be read (missing file, not USD, usd-core error).  ``str()`` is one line."""
-
-
-def one_line(e: BaseException) -> str:
-    """A one-line reason from an exception (usd-core's ``Error in 'func' at line ... : 'why'``
-    reduced to ``why``)."""
-    text = " ".join(str(e).split())
-    m = re.search(r"file \S+ : '(.+?)'(?: Error in|$)", text)
-    if m:
-        text = m.group(1)
-    return text[:300] + ("..." if len(text) > 300 else "") or type(e).__name__
 
 
 def open_asset(path) -> LoadedAsset:
@@ -138,7 +130,7 @@ def summarize(asset: LoadedAsset) -> dict:
     out["parts"] = parts
     prov = {}
     if asset.mesh is not None:
-        prov = _plain(dict(asset.mesh.GetCustomData().get("colossus", {}) or {}))
+        prov = _plain(dict(asset.mesh.GetCustomData().get(schema.PROVENANCE_KEY, {}) or {}))
     out["provenance"] = prov
     return out
 

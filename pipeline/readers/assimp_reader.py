@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model import Clip, SkinnedMesh
-from ..xforms import compose_trs, decompose_trs
+from ..xforms import compose_trs, decompose_trs, slerp
 from .common import AllocationBudget, check_finite, check_input_file, clip_name, infer_fps, pack_influences
 from .fbx_header import read_global_settings
 
@@ -69,20 +69,6 @@ def _mv(mv, dtype, width):
     return a.reshape(-1, width) if width > 1 else a
 
 
-def _slerp(q0, q1, u):
-    """Slerp between (..., 4) quaternions by fractions ``u`` (...,)."""
-    dot = np.sum(q0 * q1, axis=-1)
-    q1 = np.where(dot[..., None] < 0, -q1, q1)
-    dot = np.abs(dot)
-    theta = np.arccos(np.clip(dot, -1.0, 1.0))
-    s = np.sin(theta)
-    small = s < 1e-8
-    a = np.where(small, 1 - u, np.sin((1 - u) * theta) / np.where(small, 1, s))
-    b = np.where(small, u, np.sin(u * theta) / np.where(small, 1, s))
-    q = a[..., None] * q0 + b[..., None] * q1
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
-
-
 def _sample(times, key_t, key_v, kind):
     """Sample keys at ``times`` (clamped outside the key range)."""
     if len(key_t) == 1:
@@ -91,7 +77,7 @@ def _sample(times, key_t, key_v, kind):
     t0, t1 = key_t[i], key_t[i + 1]
     u = np.clip((times - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0, 1.0)
     if kind == "rot":
-        return _slerp(key_v[i], key_v[i + 1], u)
+        return slerp(key_v[i], key_v[i + 1], u)
     return key_v[i] + (key_v[i + 1] - key_v[i]) * u[:, None]
 
 
@@ -276,7 +262,7 @@ def read_assimp(path, meshes=None, fps=None) -> SkinnedMesh:
             rt = _mv(ch.rotation_key_times, np.float64, 1)
             st = _mv(ch.scaling_key_times, np.float64, 1)
             pv = _mv(ch.position_key_values, np.float32, 3).astype(np.float64)
-            rv = _mv(ch.rotation_key_values, np.float32, 4).astype(np.float64)[:, [3, 0, 1, 2]]  # xyzw -> wxyz
+            rv = _mv(ch.rotation_key_values, np.float32, 4).astype(np.float64)  # (x, y, z, w)
             sv = _mv(ch.scaling_key_values, np.float32, 3).astype(np.float64)
             for kt, kv in ((pt, pv), (rt, rv), (st, sv)):
                 if len(kt) != len(kv):

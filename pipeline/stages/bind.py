@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from runtime.schema import parents_first
+
 from ..errors import InputError
-from ..model import Clip, SkinnedMesh, parents_first_order
+from ..model import Clip, SkinnedMesh
 from ..tolerances import NEGLIGIBLE_WEIGHT
 from . import StageReport
 
@@ -78,7 +80,7 @@ def bind(mesh: SkinnedMesh, max_influences: int = 4, unweighted: str = "error"):
         raise ValueError(f"unweighted must be one of {UNWEIGHTED_POLICIES}, got {unweighted!r}")
     n = mesh.vertex_count
     # -- joints parents-first -------------------------------------------------------------
-    order = parents_first_order(mesh.parents)
+    order = parents_first(mesh.parents)
     reordered = not np.array_equal(order, np.arange(len(order)))
     new_of_old = np.empty_like(order)
     new_of_old[order] = np.arange(len(order))

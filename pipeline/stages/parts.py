@@ -14,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import coo_matrix
 
-from pipeline.model import SkinnedMesh, Parts, parents_first_order
+from pipeline.model import SkinnedMesh, Parts
+from runtime.schema import parents_first
 from pipeline.stages import StageReport
 from pipeline.tolerances import PARTS_ANY_THRESHOLD
 
@@ -119,7 +120,7 @@ def parts(mesh: SkinnedMesh, mode: str = "dominant", min_part_faces: int = 1,
 
     folded = []
     parents = mesh.parents
-    for j in parents_first_order(parents)[::-1]:  # leaves first
+    for j in parents_first(parents)[::-1]:  # leaves first
         p = parents[j]
         if p >= 0 and 0 < len(faces[j]) < min_part_faces:
             faces[p] = np.union1d(faces[p], faces[j])

@@ -22,13 +22,15 @@ import tempfile
 
 import numpy as np
 
+from runtime import schema
+
 from ..errors import OutputError
 from ..model import SkinnedMesh
 from ..xforms import decompose_trs
 from . import StageReport
 
 OUTPUT_EXTENSIONS = (".usda", ".usdc", ".usd")
-RESERVED = ("Skeleton", "Collider")
+RESERVED = (schema.SKELETON_NAME, schema.COLLIDER_NAME)
 
 
 def _ident(name: str, taken: set) -> str:
@@ -51,11 +53,6 @@ def joint_paths(names, parents) -> list:
         ident = _ident(name, taken.setdefault(prefix, set()))
         paths.append(prefix + ident)
     return paths
-
-
-def _mat_array(m: np.ndarray):
-    from pxr import Vt
-    return Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.swapaxes(m, -1, -2)))
 
 
 def check_output_path(out_path) -> str:
@@ -122,12 +119,12 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         stage.SetDefaultPrim(root.GetPrim())
 
         # -- skeleton ------------------------------------------------------------------------
-        skel = UsdSkel.Skeleton.Define(stage, root_path.AppendChild("Skeleton"))
+        skel = UsdSkel.Skeleton.Define(stage, root_path.AppendChild(schema.SKELETON_NAME))
         jpaths = joint_paths(mesh.joint_names, mesh.parents)
         skel.CreateJointsAttr(Vt.TokenArray(jpaths))
         skel.CreateJointNamesAttr(Vt.TokenArray(list(mesh.joint_names)))
-        skel.CreateBindTransformsAttr(_mat_array(mesh.bind_transforms))
-        skel.CreateRestTransformsAttr(_mat_array(mesh.rest_transforms))
+        skel.CreateBindTransformsAttr(schema.matrices_to_usd(mesh.bind_transforms))
+        skel.CreateRestTransformsAttr(schema.matrices_to_usd(mesh.rest_transforms))
 
         # -- clips ---------------------------------------------------------------------------
         taken = set(RESERVED)
@@ -136,11 +133,11 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
             name = _ident(clip.name, taken)
             anim = UsdSkel.Animation.Define(stage, root_path.AppendChild(name))
             if name != clip.name:
-                anim.GetPrim().SetCustomDataByKey("colossus:clipName", clip.name)
+                anim.GetPrim().SetCustomDataByKey(schema.CLIP_NAME_KEY, clip.name)
             anim.CreateJointsAttr(Vt.TokenArray(jpaths))
             t, q, s = decompose_trs(clip.local)
             ta, ra, sa = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr(), anim.CreateScalesAttr()
-            qxyzw = np.ascontiguousarray(q[..., [1, 2, 3, 0]], dtype=np.float32)
+            qxyzw = np.ascontiguousarray(q, dtype=np.float32)
             for f, code in enumerate(clip.times):
                 tc = Usd.TimeCode(float(code))
                 ta.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(t[f], dtype=np.float32)), tc)
@@ -151,7 +148,7 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
             UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([clip_paths[0]])
 
         # -- collision mesh ------------------------------------------------------------------
-        geo = UsdGeom.Mesh.Define(stage, root_path.AppendChild("Collider"))
+        geo = UsdGeom.Mesh.Define(stage, root_path.AppendChild(schema.COLLIDER_NAME))
         pts = np.ascontiguousarray(mesh.positions, dtype=np.float32)
         geo.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
         geo.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(mesh.face_count, 3, dtype=np.int32)))
@@ -167,20 +164,16 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         binding.CreateJointIndicesPrimvar(False, k).Set(Vt.IntArray.FromNumpy(mesh.joint_indices.reshape(-1).astype(np.int32)))
         binding.CreateJointWeightsPrimvar(False, k).Set(Vt.FloatArray.FromNumpy(mesh.joint_weights.reshape(-1).astype(np.float32)))
         if not np.allclose(mesh.geom_bind, np.eye(4), rtol=0, atol=1e-12):
-            binding.CreateGeomBindTransformAttr(Gf.Matrix4d(*np.asarray(mesh.geom_bind).T.reshape(-1).tolist()))
+            binding.CreateGeomBindTransformAttr(schema.matrices_to_usd(mesh.geom_bind))
         UsdPhysics.CollisionAPI.Apply(geo.GetPrim())
         UsdPhysics.MeshCollisionAPI.Apply(geo.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.none)
 
         parts = mesh.parts
         prim = geo.GetPrim()
-        T = Sdf.ValueTypeNames
-        prim.CreateAttribute("colossus:parts:joints", T.TokenArray).Set(Vt.TokenArray([jpaths[j] for j in parts.joints]))
-        prim.CreateAttribute("colossus:parts:centers", T.Float3Array).Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(parts.centers, dtype=np.float32)))
-        prim.CreateAttribute("colossus:parts:radii", T.FloatArray).Set(Vt.FloatArray.FromNumpy(np.ascontiguousarray(parts.radii, dtype=np.float32)))
-        prim.CreateAttribute("colossus:parts:faceOffsets", T.IntArray).Set(Vt.IntArray.FromNumpy(parts.face_offsets.astype(np.int32)))
-        prim.CreateAttribute("colossus:parts:faces", T.IntArray).Set(Vt.IntArray.FromNumpy(parts.faces.astype(np.int32)))
+        schema.write_parts(prim, [jpaths[j] for j in parts.joints], parts.centers, parts.radii,
+                           parts.face_offsets, parts.faces)
         if provenance:
-            prim.SetCustomDataByKey("colossus", _plain(provenance))
+            prim.SetCustomDataByKey(schema.PROVENANCE_KEY, _plain(provenance))
         stage.GetRootLayer().documentation = f"Collider asset written by colossus from {mesh.source.get('file', '?')}"
         stage.GetRootLayer().Save()
         del stage

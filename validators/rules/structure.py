@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from pxr import UsdGeom, UsdPhysics
 
+from runtime import schema
+
 from ..registry import hit, rule
 
 _USD_VALIDATORS = None
@@ -217,7 +219,7 @@ def provenance(asset, ctx):
     `sourceSha256`, `importer` and `settings`.
     Why: a failing asset must be traceable to the export and the importer version that made it.
     Example: an asset edited by hand with its customData stripped."""
-    data = asset.mesh.GetCustomDataByKey("colossus")
+    data = asset.mesh.GetCustomDataByKey(schema.PROVENANCE_KEY)
     if not isinstance(data, dict):
         yield hit("customData has no 'colossus' provenance dictionary", prim=str(asset.mesh.GetPath()))
         return

@@ -1,0 +1,188 @@
+"""The one description of the collider asset (``../shared/CONTRACT.md``) that the writer
+(``pipeline.stages.write``) and both readers (``validators.asset``, ``runtime.asset``) use.
+
+* the ``colossus:*`` attribute and customData names, with their USD value types;
+* the parts CSR layout: part ``p``'s faces are ``faces[faceOffsets[p]:faceOffsets[p + 1]]``
+  (parts may overlap; every face is in at least one part), and the derived CSR of each part's
+  distinct vertices (:func:`part_vertex_csr`);
+* joint ordering: UsdSkel joint paths, parents before children (:func:`parents_first`);
+* the one matrix convention: numpy code works with **column-vector** ``float64`` 4x4 matrices
+  (``p' = M @ p``, translation in the last column); USD's ``GfMatrix4d`` is row-vector (the
+  transpose).  :func:`matrices_from_usd` / :func:`matrices_to_usd` are the only conversions.
+  (The runtime's numba kernels take the row-vector layout USD hands to numpy; they get it from
+  :func:`row_vector`, i.e. from this module too.)
+* quaternions are ``(x, y, z, w)`` (scalar last), pxr's numpy order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Prefix of the per-part attributes on the collision mesh.
+PARTS_PREFIX = "colossus:parts:"
+PARTS_JOINTS = PARTS_PREFIX + "joints"
+PARTS_CENTERS = PARTS_PREFIX + "centers"
+PARTS_RADII = PARTS_PREFIX + "radii"
+PARTS_FACE_OFFSETS = PARTS_PREFIX + "faceOffsets"
+PARTS_FACES = PARTS_PREFIX + "faces"
+
+#: attribute -> (field name in the readers, ``Sdf.ValueTypeNames`` member, numpy dtype, row width)
+PARTS_ATTRIBUTES = {
+    PARTS_JOINTS: ("joints", "TokenArray", None, 1),
+    PARTS_CENTERS: ("centers", "Float3Array", np.float32, 3),
+    PARTS_RADII: ("radii", "FloatArray", np.float32, 1),
+    PARTS_FACE_OFFSETS: ("face_offsets", "IntArray", np.int64, 1),
+    PARTS_FACES: ("faces", "IntArray", np.int64, 1),
+}
+
+#: The collision mesh's customData key holding the provenance dictionary.
+PROVENANCE_KEY = "colossus"
+#: A SkelAnimation's customData key with the clip's own name when it is not a valid prim name.
+CLIP_NAME_KEY = "colossus:clipName"
+#: Provenance keys of a simplified collision proxy (issue: collision proxy).
+PROXY_SOURCE_FACES = "colossus:proxy:sourceFaces"
+PROXY_MAX_DEVIATION = "colossus:proxy:maxDeviation"
+
+#: Prim names under the SkelRoot.
+SKELETON_NAME = "Skeleton"
+COLLIDER_NAME = "Collider"
+
+
+# ------------------------------------------------------------------------------ matrices
+def matrices_from_usd(value) -> np.ndarray | None:
+    """A ``GfMatrix4d`` or ``VtMatrix4dArray`` (row-vector) -> column-vector ``float64``
+    ``(4, 4)`` or ``(b, 4, 4)``; None for None or anything that is not 4x4 matrices."""
+    if value is None:
+        return None
+    a = np.array(value, dtype=np.float64)
+    if a.shape[-2:] != (4, 4) or a.ndim not in (2, 3):
+        return None
+    return np.ascontiguousarray(np.swapaxes(a, -1, -2))
+
+
+def matrices_to_usd(m: np.ndarray):
+    """Column-vector ``(b, 4, 4)`` -> ``Vt.Matrix4dArray``; ``(4, 4)`` -> ``Gf.Matrix4d``."""
+    from pxr import Gf, Vt
+
+    m = np.asarray(m, dtype=np.float64)
+    if m.ndim == 2:
+        return Gf.Matrix4d(*m.T.reshape(-1).tolist())
+    return Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.swapaxes(m, -1, -2)))
+
+
+def row_vector(m: np.ndarray) -> np.ndarray:
+    """Column-vector matrices ``(..., 4, 4)`` in the row-vector layout (``[x y z 1] @ M``) the
+    runtime's kernels loop over (contiguous copy)."""
+    return np.ascontiguousarray(np.swapaxes(np.asarray(m, dtype=np.float64), -1, -2))
+
+
+# ------------------------------------------------------------------------------ joints
+def parents_first(parents) -> np.ndarray:
+    """Joint indices ordered so every parent comes before its children.
+
+    The given order is kept when it already is parents-first (UsdSkel's own rule); otherwise each
+    joint is placed right after its not-yet-placed ancestors, the original order kept otherwise.
+    Raises ``ValueError`` on a cycle.
+    """
+    parents = np.asarray(parents, dtype=np.int64)
+    b = len(parents)
+    if b == 0 or np.all(parents < np.arange(b)):
+        return np.arange(b)
+    placed = np.zeros(b, dtype=bool)
+    order = []
+    for j in range(b):
+        chain, k = [], j
+        while k >= 0 and not placed[k]:
+            if k in chain:
+                raise ValueError("joint hierarchy has a cycle")
+            chain.append(k)
+            k = int(parents[k])
+        for c in reversed(chain):
+            placed[c] = True
+            order.append(c)
+    return np.array(order, dtype=np.int64)
+
+
+# ------------------------------------------------------------------------------ parts
+def read_parts(prim):
+    """The ``colossus:parts:*`` attributes of the collision mesh ``prim``.
+
+    Returns ``(values, errors)``: ``values[field]`` for each field of :data:`PARTS_ATTRIBUTES`
+    (``joints`` a list of str, ``centers`` (P, 3) float32, ``radii`` (P,) float32,
+    ``face_offsets`` (P + 1,) int64, ``faces`` (sum,) int64), None where unusable; ``errors`` maps
+    each unusable attribute's name to why ("missing", or its wrong type).  Never raises for a
+    malformed asset: the validators report, the runtime refuses.
+    """
+    from pxr import Sdf
+
+    values, errors = {}, {}
+    for name, (fld, typ, dtype, width) in PARTS_ATTRIBUTES.items():
+        values[fld] = None
+        attr = prim.GetAttribute(name)
+        if not attr or not attr.HasAuthoredValue():
+            errors[name] = "missing"
+            continue
+        want = getattr(Sdf.ValueTypeNames, typ)
+        if attr.GetTypeName() != want:
+            errors[name] = f"type {attr.GetTypeName()} (expected {want})"
+            continue
+        v = attr.Get()
+        if dtype is None:
+            values[fld] = [str(t) for t in v]
+        else:
+            a = np.array(v, dtype=dtype)
+            values[fld] = a.reshape(-1, width) if width > 1 else a.reshape(-1)
+    return values, errors
+
+
+def write_parts(prim, joint_paths, centers, radii, face_offsets, faces) -> None:
+    """Author the parts on the collision mesh ``prim`` with the contract's names and types.
+
+    joint_paths : list of P UsdSkel joint paths; centers (P, 3) joint-space sphere centres;
+    radii (P,); face_offsets (P + 1,) and faces: the CSR face lists."""
+    from pxr import Sdf, Vt
+
+    T = Sdf.ValueTypeNames
+    prim.CreateAttribute(PARTS_JOINTS, T.TokenArray).Set(Vt.TokenArray(list(joint_paths)))
+    prim.CreateAttribute(PARTS_CENTERS, T.Float3Array).Set(
+        Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(centers, dtype=np.float32).reshape(-1, 3)))
+    prim.CreateAttribute(PARTS_RADII, T.FloatArray).Set(
+        Vt.FloatArray.FromNumpy(np.ascontiguousarray(radii, dtype=np.float32)))
+    prim.CreateAttribute(PARTS_FACE_OFFSETS, T.IntArray).Set(
+        Vt.IntArray.FromNumpy(np.ascontiguousarray(face_offsets, dtype=np.int32)))
+    prim.CreateAttribute(PARTS_FACES, T.IntArray).Set(
+        Vt.IntArray.FromNumpy(np.ascontiguousarray(faces, dtype=np.int32)))
+
+
+def part_vertex_csr(triangles, face_offsets, faces, vertex_count: int | None = None):
+    """CSR of the distinct vertices of each part's faces.
+
+    Parameters
+    ----------
+    triangles : (F, 3) int; face_offsets : (P + 1,) int; faces : (sum,) int (valid indices)
+    vertex_count : int, optional (default ``triangles.max() + 1``)
+
+    Returns
+    -------
+    offsets : (P + 1,) int64, vertices : (sum,) int64
+        Part ``p``'s vertices, sorted, are ``vertices[offsets[p]:offsets[p + 1]]``.
+    """
+    triangles = np.asarray(triangles, dtype=np.int64)
+    face_offsets = np.asarray(face_offsets, dtype=np.int64)
+    faces = np.asarray(faces, dtype=np.int64)
+    P = len(face_offsets) - 1
+    n = max(int(vertex_count if vertex_count is not None else (triangles.max() + 1 if triangles.size else 0)), 1)
+    part_of = np.repeat(np.arange(P, dtype=np.int64), np.diff(face_offsets))
+    key = np.unique(np.repeat(part_of, 3) * n + triangles[faces].ravel())
+    offsets = np.searchsorted(key // n, np.arange(P + 1)).astype(np.int64)
+    return offsets, (key % n).astype(np.int64)
+
+
+def face_owner(face_count: int, face_offsets, faces) -> np.ndarray:
+    """(F,) int64 the first part holding each face, -1 for a face in no part."""
+    face_offsets = np.asarray(face_offsets, dtype=np.int64)
+    faces = np.asarray(faces, dtype=np.int64)
+    owner = np.full(face_count, -1, dtype=np.int64)
+    part_of = np.repeat(np.arange(len(face_offsets) - 1), np.diff(face_offsets))
+    owner[faces[::-1]] = part_of[::-1]  # the first part wins
+    return owner

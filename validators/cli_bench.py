@@ -1,0 +1,39 @@
+"""``colossus bench``: every benchmark, printed as ratios against baselines run in the same
+process (a CLI module: it reaches every floor).  Absolute times are this machine's; the ratios are
+what to compare across machines.
+"""
+
+from __future__ import annotations
+
+import os
+
+import click
+
+from pipeline.bench import bench_import, bench_scaling
+
+from .bench import format_bench, format_scale_bench, run_bench, run_scale_bench
+
+
+@click.command("bench")
+@click.option("--quick", is_flag=True, help="Smaller sizes (a smoke run).")
+@click.option("--only", type=click.Choice(["import", "scaling", "validate", "runtime", "scale"]), multiple=True,
+              help="Run only these benchmarks (repeatable).")
+def bench_cmd(quick, only):
+    """Run the benchmarks; absolute times are this machine's, ratios are against in-process baselines."""
+    want = set(only) or {"import", "scaling", "validate", "runtime", "scale"}
+    click.echo(f"colossus bench on {os.cpu_count()} cores (absolute times are this machine's)\n")
+    if "import" in want:
+        bench_import(*((20_000, 20, 2, 30) if quick else ()), echo=click.echo)
+        click.echo()
+    if "scaling" in want:
+        bench_scaling((10_000, 40_000, 160_000) if quick else (50_000, 200_000, 800_000), echo=click.echo)
+        click.echo()
+    if "validate" in want:
+        click.echo(format_bench(run_bench()))
+        click.echo()
+    if "runtime" in want:
+        from runtime.bench import format_rows as rt_format, run_bench as rt_run
+        click.echo(rt_format(rt_run()))
+    if "scale" in want:
+        click.echo()
+        click.echo(format_scale_bench(run_scale_bench(**({"count": 40} if quick else {}))))
