@@ -145,6 +145,9 @@ class Reference:
     def pose(self, clip: int, seconds: float):  # -> [array per mesh]
         raise NotImplementedError
 
+    def poses(self, clip: int, seconds):  # -> [[array per mesh] per instant]
+        return [self.pose(clip, s) for s in seconds]
+
 
 class GltfReference(Reference):
     """glTF/GLB by :mod:`.gltf_eval` (weights normalised, as the importer must do)."""
@@ -173,6 +176,9 @@ class GltfReference(Reference):
             lo, hi = p.weight_sum_range
             if p.skinned and (abs(lo - 1) > 1e-3 or abs(hi - 1) > 1e-3):
                 self.notes.append(f"{p.key}: weight sums {lo:.3f}..{hi:.3f} (compared normalised)")
+        shaped = [p.key for p in self._prims if p.morph_targets and np.any(self.doc.default_morph_weights(p) != 0)]
+        if shaped:
+            self.notes.append(f"non-zero default morph weights not applied: {', '.join(shaped)}")
         _, conflicts = self.doc.bind_world()
         if conflicts:
             self.notes.append(f"{conflicts} joints have different inverse binds in different skins")
@@ -188,6 +194,9 @@ class GltfReference(Reference):
 
     def pose(self, clip, seconds):
         return self._pick(self.doc.pose(clip, seconds))
+
+    def poses(self, clip, seconds):
+        return [self._pick(p) for p in self.doc.poses(clip, seconds)]
 
 
 class UsdReference(Reference):
@@ -546,7 +555,7 @@ def compare(source, asset, max_instants: int = MAX_INSTANTS, reference: Referenc
         mids = _subsample((clip.keys[:-1] + clip.keys[1:]) / 2, half) if clip.mids and len(clip.keys) > 1 else np.zeros(0)
         instants = np.concatenate([keys, mids])
         is_key = np.arange(len(instants)) < len(keys)
-        refp = np.array([gather(ref.pose(ci, s), moving) for s in instants])  # (T, R, 3)
+        refp = np.array([gather(p, moving) for p in ref.poses(ci, instants)])  # (T, R, 3)
         got = rig.points(aname, instants * tcps)  # (T, V, 3)
         if not matched.any():
             continue

@@ -20,7 +20,9 @@ What it covers
   (lerp, and slerp for rotations along the shorter arc, as Appendix "Interpolation" and every
   implementation do), ``STEP`` and ``CUBICSPLINE`` (Hermite with in/out tangents scaled by the
   key interval, rotations normalised after).  Times are seconds; outside a sampler's key range
-  its first/last value holds.  ``weights`` channels (morph targets) are reported, not applied.
+  its first/last value holds.  ``weights`` channels (morph targets) are reported, not applied,
+  and neither are default morph weights (:attr:`Primitive.morph_targets` says a primitive has
+  targets; :meth:`GltfDocument.default_morph_weights` gives the weights a viewer would show).
 
 Weights convention
 ------------------
@@ -56,7 +58,8 @@ ACCESSOR_TYPES = {"SCALAR": (1, 1), "VEC2": (2, 1), "VEC3": (3, 1), "VEC4": (4, 
 #: primitive modes that draw triangles (TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN)
 TRIANGLE_MODES = (4, 5, 6)
 #: extensions that change how geometry or animation is decoded; a file requiring one is refused
-UNSUPPORTED_REQUIRED = ("KHR_draco_mesh_compression", "EXT_meshopt_compression", "KHR_mesh_quantization")
+#: (KHR_mesh_quantization needs nothing more than the integer accessors decoded here)
+UNSUPPORTED_REQUIRED = ("KHR_draco_mesh_compression", "EXT_meshopt_compression")
 
 
 class GltfError(ValueError):
@@ -495,8 +498,8 @@ class GltfDocument:
             out = out.reshape(len(inp), 3, ncomp) if interp == "CUBICSPLINE" else out.reshape(len(inp), ncomp)
             if len(inp) == 0:
                 continue
-            if np.any(np.diff(inp) <= 0):
-                raise GltfError(f"{self.path}: animation {index} sampler input is not strictly increasing")
+            if np.any(np.diff(inp) < 0):  # the spec says strictly increasing; equal times are tolerated
+                raise GltfError(f"{self.path}: animation {index} sampler input decreases")
             chans.append((tgt["node"], tgt["path"], inp, out, interp))
             times.append(inp)
             interps.add(interp)
@@ -523,7 +526,7 @@ class GltfDocument:
             tc = np.clip(times, inp[0], inp[-1])
             i = np.clip(np.searchsorted(inp, tc, side="right") - 1, 0, k - 2)
             td = inp[i + 1] - inp[i]
-            u = (tc - inp[i]) / td
+            u = np.where(td > 0, (tc - inp[i]) / np.where(td > 0, td, 1.0), 1.0)  # a repeated time: the later key
             if interp == "LINEAR":
                 if path == "rotation":
                     # slerp along the shorter arc: the relative rotation's rotvec has angle <= pi
@@ -583,14 +586,26 @@ class GltfDocument:
         -------
         list of (vertex_count, 3) float64, one per entry of :attr:`primitives`.
         """
-        world = self.world(self.local_transforms(animation, [time]))[0]
+        return self.poses(animation, [time], normalise)[0]
+
+    def poses(self, animation, times, normalise: bool = True) -> list:
+        """:meth:`pose` at each of ``times`` (T,) seconds (the samplers evaluated once for all).
+
+        Returns
+        -------
+        list (T) of lists of (vertex_count, 3) float64.
+        """
+        worlds = self.world(self.local_transforms(animation, times))
         out = []
-        for prim in self.primitives:
-            if prim.skinned:
-                out.append(self.skin_points(prim, world[self.skin_joints(prim.skin)], normalise))
-            else:
-                m = world[prim.node]
-                out.append(self.positions(prim) @ m[:3, :3].T + m[:3, 3])
+        for world in worlds:
+            frame = []
+            for prim in self.primitives:
+                if prim.skinned:
+                    frame.append(self.skin_points(prim, world[self.skin_joints(prim.skin)], normalise))
+                else:
+                    m = world[prim.node]
+                    frame.append(self.positions(prim) @ m[:3, :3].T + m[:3, 3])
+            out.append(frame)
         return out
 
     def bind_world(self):
@@ -627,6 +642,12 @@ class GltfDocument:
     def joint_nodes(self) -> set:
         """Indices of the nodes that are a joint of some skin."""
         return {n for s in self.doc.get("skins", []) for n in s["joints"]}
+
+    def default_morph_weights(self, prim: Primitive) -> np.ndarray:
+        """``(targets,)`` float64 morph weights shown without animation (node ``weights``, else the
+        mesh's, else zeros); not applied by this evaluator."""
+        w = self.doc["nodes"][prim.node].get("weights", self.doc["meshes"][prim.mesh].get("weights"))
+        return np.zeros(prim.morph_targets) if w is None else np.asarray(w, dtype=np.float64)
 
     def animated_nodes(self) -> set:
         """Indices of the nodes some animation moves (TRS channels)."""
