@@ -140,13 +140,13 @@ def make_bench_asset(path):
     pose = None
     for clip, t, skel_x in poses:
         if clip is None:
-            pts_t, sk = pts, bind
+            pts_t, sk = pts, schema.row_vector(bind)  # (written above in USD's row-vector layout)
         else:
             pose = col.pose(clip, t, out=pose)
             pts_t, sk = pose.points.astype(np.float64), pose.skel_transforms
         for p in range(JOINTS):
             v = d.verts[d.vert_offsets[p]:d.vert_offsets[p + 1]]
-            h = np.c_[pts_t[v], np.ones(len(v))] @ np.linalg.inv(sk[p])
+            h = np.c_[pts_t[v], np.ones(len(v))] @ np.linalg.inv(sk[p]).T  # column-vector skel transforms
             local[p].append(h[:, :3])
     centers, rads = np.zeros((JOINTS, 3)), np.zeros(JOINTS)
     for p in range(JOINTS):

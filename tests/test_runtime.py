@@ -76,7 +76,8 @@ class UsdSkelReference:
         return p[:, :3]
 
     def skel_transforms(self, t):
-        return np.asarray(self.sq.ComputeJointSkelTransforms(t))
+        """(J, 4, 4) column-vector (USD hands row-vector matrices to numpy)."""
+        return np.asarray(self.sq.ComputeJointSkelTransforms(t)).transpose(0, 2, 1)
 
 
 def tol(col):
@@ -173,9 +174,9 @@ def test_spheres_move_with_joints(odd_path, creature):
         for clip in col.clips:
             ft = col.frame_times(clip)
             pose = col.pose(clip, ft[len(ft) // 2] + 0.5)
-            world = pose.skel_transforms[d.part_joint] @ pose.local_to_world
-            c = np.einsum("pi,pij->pj", np.c_[d.part_centers, np.ones(len(d.part_centers))], world)[:, :3]
-            s = np.linalg.norm(world[:, :3, :3], axis=2).max(1)
+            world = pose.local_to_world @ pose.skel_transforms[d.part_joint]  # column-vector
+            c = np.einsum("pij,pj->pi", world, np.c_[d.part_centers, np.ones(len(d.part_centers))])[:, :3]
+            s = np.linalg.norm(world[:, :3, :3], axis=1).max(1)
             assert np.allclose(pose.spheres[:, :3], c, atol=1e-9)
             assert np.allclose(pose.spheres[:, 3], d.part_radii * s)
             # the culling spheres bound every vertex of their part
