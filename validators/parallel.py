@@ -37,7 +37,7 @@ from .runner import _crash_report, check_asset
 SPLIT_BYTES = 64 * 2**20
 
 #: Rules that read the frame proof: splitting only pays when one of them is selected.
-PROOF_RULES = ("COL403", "COL404")
+PROOF_RULES = ("COL403", "COL404", "COL407")
 
 
 # ------------------------------------------------------------------------------ work units
@@ -66,7 +66,8 @@ def unit_clip(path, clip, kw):
     from .asset import LoadedAsset, open_stage
     from .frameproof import prove
     asset = LoadedAsset(open_stage(path), path)
-    return prove(asset, subframes=kw.get("subframes", 0), chunk_frames=kw.get("chunk_frames"), clips=[clip])
+    return prove(asset, subframes=kw.get("subframes", 0), chunk_frames=kw.get("chunk_frames"), clips=[clip],
+                 continuous=kw.get("continuous", True))
 
 
 def unit_finish(path, kw, proofs):

@@ -50,6 +50,7 @@ import numpy as np
 from numba import njit, prange
 
 from .config import FASTMATH_PROOF as _FM
+from .skin import _lbs as _lbs_j
 
 #: Relative padding of every bound (float64 rounding of the few dozen operations behind it).
 ROUND = 1e-12
@@ -340,3 +341,130 @@ def _cull_spheres(sph, kb, db, spheres, cull):
         cull[p, 1] = cy
         cull[p, 2] = cz
         cull[p, 3] = far * (1.0 + 1e-5) + 2e-6 * (abs(cx) + abs(cy) + abs(cz) + far) + 1e-9
+
+
+# ------------------------------------------------------------------ continuous time (chords)
+@njit(cache=True, parallel=True, fastmath=_FM)
+def _chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, path_off, path_j, path_dir, pj_center, pj_radius,
+                  pair_part, part_centers, e0, e1, delta, lam):
+    """Deviation-from-chord bounds of every (part, joint) ball over every interval.
+
+    For interval ``i`` (normalised time ``tau`` in [0, 1]) and pair ``k`` (part P of joint J,
+    joint b, ball (c, r) in b's bind space) the ball moves in J's space by the chain
+    ``A(tau) = G_J^-1 G_b`` = the path factors ``path_j[path_off[k]:path_off[k+1]]``, innermost
+    first: forward local transforms ``L_j`` (``path_dir`` +1, from b up to the common ancestor)
+    then inverse ones ``L_j^-1`` (-1, down to J).  Per joint and interval: ``L0/L1`` (I, J, 4, 4)
+    the local transform at the two samples, ``Li0/Li1`` their inverses, ``fw/iv`` (I, J, 3) the
+    bounds ``(n0, n1, n2)`` on the norms of the linear part of the factor and of its first and
+    second derivative in tau, ``dt`` (I, J) the change of its translation.
+
+    Recursion over the factors (``q`` the moving point, ``m, v, a`` bounds of ``|q|``, ``|q'|``,
+    ``|q''|`` over tau, for every point of the ball; ``lm`` of the norm of the product so far):
+
+    * forward ``p = T + F q`` (F = R S): ``|p'| <= dt + n1 m + n0 v``,
+      ``|p''| <= n2 m + 2 n1 v + n0 a`` (T is linear in tau: no T'');
+    * inverse ``p = F^-1 (q - T)``: with ``m_z >= sup |q - T|``, ``|p'| <= n1 m_z + n0 (v + dt)``,
+      ``|p''| <= n2 m_z + 2 n1 (v + dt) + n0 a``;
+    * after each factor ``m = max(|q(0)|, |q(1)|) + a / 8 + r lm`` (the ball's centre is
+      computed exactly at both samples; between them it is within ``a / 8`` of its chord, and the
+      ball adds ``lm r``).
+
+    Outputs (I, M): ``e0, e1`` = |A(0) c - c_P|, |A(1) c - c_P| (J space), ``delta = a / 8``
+    bounds the distance of every point of the moving ball from its chord for every tau (the
+    vector form of the linear-interpolation error, ``|p(tau) - chord| <= tau (1 - tau) / 2 sup
+    |p''|``), ``lam`` bounds the norm of A's linear part."""
+    I, M = L0.shape[0], pj_center.shape[0]
+    for task in prange(I * M):
+        i = task // M
+        k = task - i * M
+        a0x, a0y, a0z = pj_center[k, 0], pj_center[k, 1], pj_center[k, 2]
+        a1x, a1y, a1z = a0x, a0y, a0z
+        r = pj_radius[k]
+        m = math.sqrt(a0x * a0x + a0y * a0y + a0z * a0z) + r
+        v = 0.0
+        a = 0.0
+        lm = 1.0
+        for s in range(path_off[k], path_off[k + 1]):
+            j = path_j[s]
+            if path_dir[s] > 0:
+                n0, n1, n2 = fw[i, j, 0], fw[i, j, 1], fw[i, j, 2]
+                vn = dt[i, j] + n1 * m + n0 * v
+                an = n2 * m + 2.0 * n1 * v + n0 * a
+                A, Bm = L0, L1
+            else:
+                n0, n1, n2 = iv[i, j, 0], iv[i, j, 1], iv[i, j, 2]
+                zx, zy, zz = a0x - L0[i, j, 0, 3], a0y - L0[i, j, 1, 3], a0z - L0[i, j, 2, 3]
+                wx, wy, wz = a1x - L1[i, j, 0, 3], a1y - L1[i, j, 1, 3], a1z - L1[i, j, 2, 3]
+                mz = max(math.sqrt(zx * zx + zy * zy + zz * zz), math.sqrt(wx * wx + wy * wy + wz * wz)) + a / 8.0 + r * lm
+                vn = n1 * mz + n0 * (v + dt[i, j])
+                an = n2 * mz + 2.0 * n1 * (v + dt[i, j]) + n0 * a
+                A, Bm = Li0, Li1
+            x = A[i, j, 0, 0] * a0x + A[i, j, 0, 1] * a0y + A[i, j, 0, 2] * a0z + A[i, j, 0, 3]
+            y = A[i, j, 1, 0] * a0x + A[i, j, 1, 1] * a0y + A[i, j, 1, 2] * a0z + A[i, j, 1, 3]
+            z = A[i, j, 2, 0] * a0x + A[i, j, 2, 1] * a0y + A[i, j, 2, 2] * a0z + A[i, j, 2, 3]
+            a0x, a0y, a0z = x, y, z
+            x = Bm[i, j, 0, 0] * a1x + Bm[i, j, 0, 1] * a1y + Bm[i, j, 0, 2] * a1z + Bm[i, j, 0, 3]
+            y = Bm[i, j, 1, 0] * a1x + Bm[i, j, 1, 1] * a1y + Bm[i, j, 1, 2] * a1z + Bm[i, j, 1, 3]
+            z = Bm[i, j, 2, 0] * a1x + Bm[i, j, 2, 1] * a1y + Bm[i, j, 2, 2] * a1z + Bm[i, j, 2, 3]
+            a1x, a1y, a1z = x, y, z
+            v = vn
+            a = an
+            lm = lm * n0
+            m = max(math.sqrt(a0x * a0x + a0y * a0y + a0z * a0z),
+                    math.sqrt(a1x * a1x + a1y * a1y + a1z * a1z)) + a / 8.0 + r * lm
+        p = pair_part[k]
+        cx, cy, cz = part_centers[p, 0], part_centers[p, 1], part_centers[p, 2]
+        e0[i, k] = math.sqrt((a0x - cx) ** 2 + (a0y - cy) ** 2 + (a0z - cz) ** 2)
+        e1[i, k] = math.sqrt((a1x - cx) ** 2 + (a1y - cy) ** 2 + (a1z - cz) ** 2)
+        delta[i, k] = a / 8.0 * (1.0 + 1e-9)
+        lam[i, k] = lm
+
+
+@njit(cache=True, parallel=True, fastmath=_FM)
+def _chord_tasks(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta,
+                 task_scale, delta, out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
+    """Per-vertex chord bound of (part, time interval) tasks.
+
+    Task ``t``: part ``p = task_part[t]``; the J-space skinning transforms of the interval's two
+    ends are ``mats[task_a[t]]`` and ``mats[task_b[t]]`` ((T, J, 12), J = the part's joint);
+    ``delta[task_delta[t]]`` (J,) the chord deviation of each joint's copy of the part's points
+    over the whole sample interval, times ``task_scale[t]`` (the square of the sub-interval's
+    fraction of it).  For every vertex v of the part:
+    ``U(v) = max(|y_v(a) - c|, |y_v(b) - c|) + scale * sum_i |w_i(v)| delta[j_i(v)]`` bounds
+    ``|y_v(tau) - c|`` on the whole sub-interval (LBS is linear in the joint transforms, so the
+    vertex strays from its chord by at most the weighted strays of its copies; the chord stays
+    within the larger end distance).  Out: the largest U and its vertex, the largest end
+    distances and their vertices."""
+    for t in prange(task_part.shape[0]):
+        p = task_part[t]
+        ia, ib, row, sc = task_a[t], task_b[t], task_delta[t], task_scale[t]
+        cx, cy, cz = centers[p, 0], centers[p, 1], centers[p, 2]
+        bu, bd0, bd1 = -1.0, -1.0, -1.0
+        vu, v0, v1 = -1, -1, -1
+        for s in range(poff[p], poff[p + 1]):
+            v = pverts[s]
+            x, y, z = _lbs_j(v, ia, points, ji, jw, mats)
+            d0 = math.sqrt((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2)
+            x, y, z = _lbs_j(v, ib, points, ji, jw, mats)
+            d1 = math.sqrt((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2)
+            dev = 0.0
+            for i in range(ji.shape[1]):
+                w = abs(np.float64(jw[v, i]))
+                if w != 0.0:
+                    dev += w * delta[row, ji[v, i]]
+            u = max(d0, d1) + sc * dev
+            if not (u <= bu):
+                bu = u if u == u else np.inf
+                vu = v
+            if not (d0 <= bd0):
+                bd0 = d0 if d0 == d0 else np.inf
+                v0 = v
+            if not (d1 <= bd1):
+                bd1 = d1 if d1 == d1 else np.inf
+                v1 = v
+        out_u[t] = bu * (1.0 + ROUND)
+        out_vu[t] = vu
+        out_d0[t] = bd0
+        out_v0[t] = v0
+        out_d1[t] = bd1
+        out_v1[t] = v1
