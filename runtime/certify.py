@@ -327,7 +327,8 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     K1 = np.full((I, P), np.inf)
     if M:
         K1[:, nonempty] = np.maximum.reduceat(kc, starts[nonempty], axis=1)
-    K1 = bd.part_wabs[None] * K1 + bd.part_wdev[None] * np.linalg.norm(bd.part_centers, axis=1)[None]
+    K1 = np.where(nonempty[None], bd.part_wabs[None] * K1, 0.0) \
+        + bd.part_wdev[None] * np.linalg.norm(bd.part_centers, axis=1)[None]  # an empty part holds trivially
     # level A2: chords of the sampled bounds
     own = bd.pj_joint == J[pair_part] if M else np.zeros(0, bool)
     dl = np.where(own[None], 0.0, delta)
