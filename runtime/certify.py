@@ -182,7 +182,12 @@ def factor_bounds(clip, times, rest_local):
     -s'/s^2``, ``(1/s)'' = 2 s'^2 / s^3``).  A joint the clip does not animate is a constant
     factor: ``n0`` its linear part's norm (or its inverse's), ``n1 = n2 = dt = 0``.
 
-    Returns a dict of (I, J, ...) float64 arrays: L0, L1, Li0, Li1, fw, iv, dt."""
+    UsdSkel lerps ``half3`` scales in half precision (three roundings, each within 2^-11 of a
+    value at most ``s_max``), so between samples the true scale is within ``e = 3 * 2^-11 s_max``
+    of the smooth lerp when the scale changes over the interval: ``eps`` (I, J, 2) bounds the
+    resulting error of the linear part, ``e`` forward and ``e / (s_min (s_min - e))`` inverse.
+
+    Returns a dict of (I, J, ...) float64 arrays: L0, L1, Li0, Li1, fw, iv, dt, eps."""
     times = np.asarray(times, dtype=np.float64)
     L = PK.locals_at(clip, times, rest_local)
     Li = np.linalg.inv(L)
@@ -190,6 +195,7 @@ def factor_bounds(clip, times, rest_local):
     fw = np.zeros((I, J, 3))
     iv = np.zeros((I, J, 3))
     dt = np.zeros((I, J))
+    eps = np.zeros((I, J, 2))
     lin = rest_local[:, :3, :3]
     fw[:, :, 0] = _norm2(lin)[None]
     iv[:, :, 0] = _norm2(np.linalg.inv(lin))[None]
@@ -214,9 +220,14 @@ def factor_bounds(clip, times, rest_local):
                              2 * ds ** 2 * inv_s ** 3 + 2 * om * ds * inv_s ** 2 + al * inv_s], -1)
         iv[:, a] = np.where(np.isfinite(iv[:, a]), iv[:, a], np.inf)
         dt[:, a] = np.linalg.norm(t[1:] - t[:-1], axis=-1)
+        e = np.where(ds > 0, 3.0 * 2.0 ** -11 * smax, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ei = np.where(e > 0, e / (smin * (smin - e)), 0.0)
+        eps[:, a, 0] = e
+        eps[:, a, 1] = np.where((e > 0) & ~(smin > e), np.inf, ei)
     return dict(L0=np.ascontiguousarray(L[:-1]), L1=np.ascontiguousarray(L[1:]),
                 Li0=np.ascontiguousarray(Li[:-1]), Li1=np.ascontiguousarray(Li[1:]), fw=fw, iv=iv, dt=dt,
-                locals=L)
+                eps=eps, locals=L)
 
 
 def _norm2(lin):
@@ -276,7 +287,8 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     * Level C: halve the interval (UsdSkel's interpolation evaluated at the midpoint by the
       runtime's port, :mod:`runtime.kernels.pose`); on a sub-interval of fraction f the
       recursion's velocities scale by f and accelerations by f^2 (the magnitudes bounded on the
-      whole interval stay valid), so ``delta`` becomes ``f^2 delta``.  Up to ``max_depth`` halvings.
+      whole interval stay valid), so ``delta`` becomes ``f^2 delta`` (``pert``, the half-precision
+      scale rounding, stays).  Up to ``max_depth`` halvings.
 
     An interval fails when a sub-sample time has a vertex outside the sphere by more than the
     tolerance (skinned exactly in stage space); it is then sampled at :data:`FAIL_SAMPLES`
@@ -301,10 +313,10 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     fac = factor_bounds(clip, times, rig.rest_local)
     off, pj, pd, pair_part = rig.paths()
     M = len(bd.pj_joint)
-    e0, e1, delta, lam = (np.zeros((I, M)) for _ in range(4))
+    e0, e1, delta, lam, pert = (np.zeros((I, M)) for _ in range(5))
     if M:
-        B._chain_bounds(fac["L0"], fac["L1"], fac["Li0"], fac["Li1"], fac["fw"], fac["iv"], fac["dt"], off, pj,
-                        pd, bd.pj_center, bd.pj_radius, pair_part, bd.part_centers, e0, e1, delta, lam)
+        B._chain_bounds(fac["L0"], fac["L1"], fac["Li0"], fac["Li1"], fac["fw"], fac["iv"], fac["dt"], fac["eps"],
+                        off, pj, pd, bd.pj_center, bd.pj_radius, pair_part, bd.part_centers, e0, e1, delta, lam, pert)
     # scale bounds of N_J over each interval (products along the root path)
     s_hi = np.ones((I, len(rig.bind)))
     s_lo = np.ones((I, len(rig.bind)))
@@ -321,7 +333,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
         rho = (r[None] * (1.0 + tol_rel) * s_lo[:, J] + tol_abs) / s_hi[:, J]
     rho = np.broadcast_to(np.asarray(rho, dtype=np.float64), (I, P)).copy()
     # level A1: the continuous test K
-    kc = np.maximum(e0, e1) + delta + lam * bd.pj_radius[None]
+    kc = np.maximum(e0, e1) + delta + pert + lam * bd.pj_radius[None]
     starts = bd.pj_offsets[:-1]
     nonempty = np.diff(bd.pj_offsets) > 0
     K1 = np.full((I, P), np.inf)
@@ -331,7 +343,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
         + bd.part_wdev[None] * np.linalg.norm(bd.part_centers, axis=1)[None]  # an empty part holds trivially
     # level A2: chords of the sampled bounds
     own = bd.pj_joint == J[pair_part] if M else np.zeros(0, bool)
-    dl = np.where(own[None], 0.0, delta)
+    dl = np.where(own[None], 0.0, delta + pert)
     dev_max = np.zeros((I, P))
     dev_sum = np.zeros((I, P))
     if M:
@@ -354,7 +366,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     out = Continuous(status, bound, rho)
     todo = np.argwhere(status == -1)
     if len(todo):
-        _refine(rig, clip, times, fac, delta, own, pair_part, todo, out, tol_abs, tol_rel, growth, max_depth)
+        _refine(rig, clip, times, fac, delta, pert, own, pair_part, todo, out, tol_abs, tol_rel, growth, max_depth)
     return out
 
 
@@ -388,25 +400,30 @@ class _Mats:
         return np.ascontiguousarray(np.stack(self.rows)) if self.rows else np.zeros((0, len(self.rig.bind), 12))
 
 
-def _refine(rig, clip, times, fac, delta, own, pair_part, todo, out, tol_abs, tol_rel, growth, max_depth):
+def _refine(rig, clip, times, fac, delta, pert, own, pair_part, todo, out, tol_abs, tol_rel, growth, max_depth):
     """Levels B and C of :func:`continuous` for the (interval, part) pairs ``todo``."""
     bd = rig.bounds
     P, Jn = rig.P, len(rig.bind)
     mats = _Mats(rig, clip, times, fac)
     # dense per (interval, part) deviation rows, by joint
     rows = {}
-    drow = []
+    drow, prow = [], []
     for i, p in todo:
         rows[(i, p)] = len(drow)
         d = np.zeros(Jn)
+        e = np.zeros(Jn)
         lo, hi = bd.pj_offsets[p], bd.pj_offsets[p + 1]
         d[bd.pj_joint[lo:hi]] = np.where(own[lo:hi], 0.0, delta[i, lo:hi])
+        e[bd.pj_joint[lo:hi]] = np.where(own[lo:hi], 0.0, pert[i, lo:hi])
         drow.append(d)
+        prow.append(e)
     drow = np.ascontiguousarray(np.array(drow))
+    prow = np.ascontiguousarray(np.array(prow))
     # nodes: (i, p, ta, tb, depth); depth 0 is the whole interval (level B)
     nodes = [(int(i), int(p), float(times[i]), float(times[i + 1]), 0) for i, p in todo]
     worst = {}
     deepest = {}
+    found = {}
     while nodes:
         tp, ta, tb, tr, ts = [], [], [], [], []
         for i, p, a, b, depth in nodes:
@@ -422,7 +439,7 @@ def _refine(rig, clip, times, fac, delta, own, pair_part, todo, out, tol_abs, to
                np.empty(n, np.int64)]
         B._chord_tasks(rig.points, rig.joint_indices, rig.joint_weights, mats.array(), rig.vert_offsets, rig.verts,
                        bd.part_centers, np.array(tp, np.int64), np.array(ta, np.int64), np.array(tb, np.int64),
-                       np.array(tr, np.int64), np.array(ts), drow, *res)
+                       np.array(tr, np.int64), np.array(ts), drow, prow, *res)
         u, vu, d0, v0, d1, v1 = res
         nxt = []
         for n_, (i, p, a, b, depth) in enumerate(nodes):
@@ -436,9 +453,11 @@ def _refine(rig, clip, times, fac, delta, own, pair_part, todo, out, tol_abs, to
                 continue
             if not growth and depth > 0 and max(d0[n_], d1[n_]) > rho:
                 # an end of this sub-interval may be a real failure: decide in stage space
-                t_end, v_end = (a, v0[n_]) if d0[n_] >= d1[n_] else (b, v1[n_])
-                if _stage_excess(rig, mats.skel_at(t_end), p, tol_abs, tol_rel) > 0:
+                t_end = a if d0[n_] >= d1[n_] else b
+                d, R, v = sampled_exact(rig, mats.skel_at(t_end)[None], [p])
+                if d[0] - R[0] * (1 + tol_rel) - tol_abs > 0:
                     out.status[i, p] = 3
+                    found[key] = (t_end, int(v[0]), float(d[0] - R[0]), float(R[0]))
                     continue
             if depth >= max_depth:
                 worst[key] = max(worst.get(key, -np.inf), u[n_])
@@ -456,19 +475,12 @@ def _refine(rig, clip, times, fac, delta, own, pair_part, todo, out, tol_abs, to
             out.status[i, p] = 1 if deepest.get(key, 0) == 0 else 2
         out.bound[i, p] = worst.get(key, np.inf) if out.status[i, p] != 3 else np.inf
     for i, p in np.argwhere((out.status == 3) | (out.status == 4)):
-        out.failures.append(_describe_failure(rig, clip, times, int(i), int(p), out, mats, tol_abs, tol_rel))
-
-
-def _stage_excess(rig, skel, p, tol_abs, tol_rel):
-    """Exact stage-space excess beyond the tolerance of part ``p``'s farthest vertex at pose
-    ``skel`` (J, 4, 4): > 0 means a real failure."""
-    s = sampled_exact(rig, skel[None], [p])
-    d, R = s
-    return float(d[0] - R[0] * (1 + tol_rel) - tol_abs)
+        out.failures.append(_describe_failure(rig, clip, times, int(i), int(p), out, mats, found.get((int(i), int(p)))))
 
 
 def sampled_exact(rig, skel, parts):
-    """Exact farthest distance (F, len(parts)) and sphere radius of ``parts`` at poses ``skel``."""
+    """Exact farthest distance (F,), sphere radius (F,) and farthest vertex (F,) of part
+    ``parts[0]`` at poses ``skel`` (F, J, 4, 4), stage space."""
     skel = np.asarray(skel, dtype=np.float64)
     world = rig.world @ skel
     sph, _, _ = B.pose_bounds(world, rig.bounds)
@@ -476,10 +488,12 @@ def sampled_exact(rig, skel, parts):
     todo[:, parts] = True
     d, v = SK.part_farthest(rig.points, rig.joint_indices, rig.joint_weights, rig.skin_mats(skel),
                             rig.vert_offsets, rig.verts, sph[..., :3], todo=todo)
-    return d[:, parts][:, 0], sph[:, parts, 3][:, 0]
+    return d[:, parts][:, 0], sph[:, parts, 3][:, 0], v[:, parts][:, 0]
 
 
-def _describe_failure(rig, clip, times, i, p, out, mats, tol_abs, tol_rel):
+def _describe_failure(rig, clip, times, i, p, out, mats, found):
+    """The worst excess of part ``p`` over interval ``i``: the time the subdivision found outside
+    and :data:`FAIL_SAMPLES` evenly spaced sub-steps, all skinned exactly in stage space."""
     t0, t1 = float(times[i]), float(times[i + 1])
     sub = t0 + (t1 - t0) * np.arange(1, FAIL_SAMPLES) / FAIL_SAMPLES
     skel = np.stack([mats.skel_at(t) for t in sub])
@@ -491,6 +505,8 @@ def _describe_failure(rig, clip, times, i, p, out, mats, tol_abs, tol_rel):
                             rig.vert_offsets, rig.verts, sph[..., :3], todo=todo)
     ex = d[:, p] - sph[:, p, 3]
     k = int(np.argmax(ex))
-    return {"interval": i, "part": p, "t0": t0, "t1": t1, "time": float(sub[k]), "vertex": int(v[k, p]),
-            "excess": float(ex[k]), "radius": float(sph[k, p, 3]), "definite": bool(out.status[i, p] == 3),
-            "bound": float(out.bound[i, p])}
+    time, vertex, excess, radius = float(sub[k]), int(v[k, p]), float(ex[k]), float(sph[k, p, 3])
+    if found is not None and found[2] > excess:
+        time, vertex, excess, radius = found
+    return {"interval": i, "part": p, "t0": t0, "t1": t1, "time": time, "vertex": vertex, "excess": excess,
+            "radius": radius, "definite": bool(out.status[i, p] == 3), "bound": float(out.bound[i, p])}

@@ -345,8 +345,8 @@ def _cull_spheres(sph, kb, db, spheres, cull):
 
 # ------------------------------------------------------------------ continuous time (chords)
 @njit(cache=True, parallel=True, fastmath=_FM)
-def _chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, path_off, path_j, path_dir, pj_center, pj_radius,
-                  pair_part, part_centers, e0, e1, delta, lam):
+def _chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius,
+                  pair_part, part_centers, e0, e1, delta, lam, pert):
     """Deviation-from-chord bounds of every (part, joint) ball over every interval.
 
     For interval ``i`` (normalised time ``tau`` in [0, 1]) and pair ``k`` (part P of joint J,
@@ -369,6 +369,11 @@ def _chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, path_off, path_j, path_dir, pj_c
       computed exactly at both samples; between them it is within ``a / 8`` of its chord, and the
       ball adds ``lm r``).
 
+    ``eps`` (I, J, 2): bounds of the error of the factor's linear part (forward, inverse) from
+    UsdSkel's half-precision scale lerp (not smooth, so not in ``a``): ``pert`` accumulates it,
+    ``pert <- n0 pert + eps m`` (the input's magnitude), and bounds how far the point is from the
+    smooth path; unlike ``delta`` it does not shrink when the interval is subdivided.
+
     Outputs (I, M): ``e0, e1`` = |A(0) c - c_P|, |A(1) c - c_P| (J space), ``delta = a / 8``
     bounds the distance of every point of the moving ball from its chord for every tau (the
     vector form of the linear-interpolation error, ``|p(tau) - chord| <= tau (1 - tau) / 2 sup
@@ -384,12 +389,14 @@ def _chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, path_off, path_j, path_dir, pj_c
         v = 0.0
         a = 0.0
         lm = 1.0
+        pe = 0.0
         for s in range(path_off[k], path_off[k + 1]):
             j = path_j[s]
             if path_dir[s] > 0:
                 n0, n1, n2 = fw[i, j, 0], fw[i, j, 1], fw[i, j, 2]
                 vn = dt[i, j] + n1 * m + n0 * v
                 an = n2 * m + 2.0 * n1 * v + n0 * a
+                pe = n0 * pe + eps[i, j, 0] * m
                 A, Bm = L0, L1
             else:
                 n0, n1, n2 = iv[i, j, 0], iv[i, j, 1], iv[i, j, 2]
@@ -398,6 +405,7 @@ def _chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, path_off, path_j, path_dir, pj_c
                 mz = max(math.sqrt(zx * zx + zy * zy + zz * zz), math.sqrt(wx * wx + wy * wy + wz * wz)) + a / 8.0 + r * lm
                 vn = n1 * mz + n0 * (v + dt[i, j])
                 an = n2 * mz + 2.0 * n1 * (v + dt[i, j]) + n0 * a
+                pe = n0 * pe + eps[i, j, 1] * mz
                 A, Bm = Li0, Li1
             x = A[i, j, 0, 0] * a0x + A[i, j, 0, 1] * a0y + A[i, j, 0, 2] * a0z + A[i, j, 0, 3]
             y = A[i, j, 1, 0] * a0x + A[i, j, 1, 1] * a0y + A[i, j, 1, 2] * a0z + A[i, j, 1, 3]
@@ -418,19 +426,21 @@ def _chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, path_off, path_j, path_dir, pj_c
         e1[i, k] = math.sqrt((a1x - cx) ** 2 + (a1y - cy) ** 2 + (a1z - cz) ** 2)
         delta[i, k] = a / 8.0 * (1.0 + 1e-9)
         lam[i, k] = lm
+        pert[i, k] = pe * (1.0 + 1e-9)
 
 
 @njit(cache=True, parallel=True, fastmath=_FM)
 def _chord_tasks(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta,
-                 task_scale, delta, out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
+                 task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
     """Per-vertex chord bound of (part, time interval) tasks.
 
     Task ``t``: part ``p = task_part[t]``; the J-space skinning transforms of the interval's two
     ends are ``mats[task_a[t]]`` and ``mats[task_b[t]]`` ((T, J, 12), J = the part's joint);
     ``delta[task_delta[t]]`` (J,) the chord deviation of each joint's copy of the part's points
     over the whole sample interval, times ``task_scale[t]`` (the square of the sub-interval's
-    fraction of it).  For every vertex v of the part:
-    ``U(v) = max(|y_v(a) - c|, |y_v(b) - c|) + scale * sum_i |w_i(v)| delta[j_i(v)]`` bounds
+    fraction of it), plus ``pert[task_delta[t]]`` (J,) the half-precision scale rounding (not
+    scaled).  For every vertex v of the part:
+    ``U(v) = max(|y_v(a) - c|, |y_v(b) - c|) + sum_i |w_i(v)| (scale delta + pert)[j_i(v)]`` bounds
     ``|y_v(tau) - c|`` on the whole sub-interval (LBS is linear in the joint transforms, so the
     vertex strays from its chord by at most the weighted strays of its copies; the chord stays
     within the larger end distance).  Out: the largest U and its vertex, the largest end
@@ -451,8 +461,8 @@ def _chord_tasks(points, ji, jw, mats, poff, pverts, centers, task_part, task_a,
             for i in range(ji.shape[1]):
                 w = abs(np.float64(jw[v, i]))
                 if w != 0.0:
-                    dev += w * delta[row, ji[v, i]]
-            u = max(d0, d1) + sc * dev
+                    dev += w * (sc * delta[row, ji[v, i]] + pert[row, ji[v, i]])
+            u = max(d0, d1) + dev
             if not (u <= bu):
                 bu = u if u == u else np.inf
                 vu = v

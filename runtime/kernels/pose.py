@@ -6,7 +6,9 @@ Conventions (:mod:`runtime.schema`): matrices are **column-vector** ``(4, 4) flo
 
 UsdSkel's interpolation between time samples (``pxr/usd/usd/interpolators.h``): translations and
 scales are lerped, rotations are ``GfSlerp``-ed; outside the sampled range the first / last
-sample is held.  ``GfSlerp`` takes the **shortest arc** (it negates ``q1`` when ``q0 . q1 < 0``)
+sample is held.  Scales are ``half3``: ``GfLerp`` on them rounds every operation to half
+precision (:func:`_half`), so an in-between scale is within ``3 x 2^-11`` (relative) of the exact
+lerp; the continuous certificate charges that (:func:`runtime.certify.factor_bounds`).  ``GfSlerp`` takes the **shortest arc** (it negates ``q1`` when ``q0 . q1 < 0``)
 and falls back to a linear blend when ``1 - |q0 . q1| <= 1e-5``; :func:`_slerp` does the same and
 normalises (the renormalisation matters on the linear branch only).  The shortest-arc behaviour is
 checked against usd-core in ``tests/test_kernels.py``.  A joint-local matrix is ``T R S`` (scale,
@@ -35,6 +37,17 @@ def _bracket(times, t):
     i = np.searchsorted(times, t, side="right") - 1
     a = (t - times[i]) / (times[i + 1] - times[i])
     return i, a
+
+
+@njit(cache=True, inline="always")
+def _half(x):
+    """``x`` rounded to the nearest IEEE half (ties to even), as ``GfHalf`` stores it (normal
+    range; UsdSkel's scales are ``half3``)."""
+    if x == 0.0 or not math.isfinite(x):
+        return x
+    m, e = math.frexp(x)
+    q = math.ldexp(1.0, max(e, -13) - 11)  # the half's quantum at this magnitude (subnormals below 2^-14)
+    return np.rint(x / q) * q
 
 
 @njit(cache=True, inline="always")
@@ -106,8 +119,8 @@ def _trs_at(t, tt, vt, tr, vr, ts, vs, out_t, out_q, out_s):
                 out_t[k, c] = (1.0 - aT) * vt[iT, k, c] + aT * vt[iT + 1, k, c]
             if aS == 0.0:
                 out_s[k, c] = vs[iS, k, c]
-            else:
-                out_s[k, c] = (1.0 - aS) * vs[iS, k, c] + aS * vs[iS + 1, k, c]
+            else:  # GfLerp on GfVec3h: every operation rounds to half
+                out_s[k, c] = _half(_half((1.0 - aS) * vs[iS, k, c]) + _half(aS * vs[iS + 1, k, c]))
         if aR == 0.0:
             for c in range(4):
                 out_q[k, c] = vr[iR, k, c]
