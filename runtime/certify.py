@@ -197,6 +197,8 @@ def factor_bounds(clip, times, rest_local):
     dt = np.zeros((I, J))
     eps = np.zeros((I, J, 2))
     lin = rest_local[:, :3, :3]
+    sv = np.linalg.svd(lin, compute_uv=False)
+    iso = np.repeat((sv[:, 0] - sv[:, -1] <= 1e-12 * sv[:, 0])[None], I, 0)  # a similarity factor
     fw[:, :, 0] = _norm2(lin)[None]
     iv[:, :, 0] = _norm2(np.linalg.inv(lin))[None]
     if len(clip.anim_to_skel) and I > 0:
@@ -223,11 +225,12 @@ def factor_bounds(clip, times, rest_local):
         e = np.where(ds > 0, 3.0 * 2.0 ** -11 * smax, 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             ei = np.where(e > 0, e / (smin * (smin - e)), 0.0)
+        iso[:, a] = (np.ptp(s[:-1], axis=-1) == 0) & (np.ptp(s[1:], axis=-1) == 0)  # uniform at both ends
         eps[:, a, 0] = e
         eps[:, a, 1] = np.where((e > 0) & ~(smin > e), np.inf, ei)
     return dict(L0=np.ascontiguousarray(L[:-1]), L1=np.ascontiguousarray(L[1:]),
                 Li0=np.ascontiguousarray(Li[:-1]), Li1=np.ascontiguousarray(Li[1:]), fw=fw, iv=iv, dt=dt,
-                eps=eps, locals=L)
+                eps=eps, iso=iso, locals=L)
 
 
 def _norm2(lin):
@@ -269,10 +272,14 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     * J space: ``y_v(tau) = sum_b w_b A_b(tau) u_b(v)`` with ``A_b = G_J^-1 G_b`` (the skeleton's
       root motion and the stage transform cancel).  Containment in stage space follows from
       ``|y_v - c_P| <= rho``: ``|x - C| <= ||L(N_J)|| |y - c|`` and ``R = r mu(N_J) >= r
-      sigma_min(N_J)``, so ``rho = (r (1 + tol_rel) s_lo + tol_abs) / s_hi`` with ``s_hi, s_lo``
+      sigma_min(N_J)``, so ``rho = r (1 + tol_rel) s_lo / s_hi + tol_abs / s_hi`` with ``s_hi, s_lo``
       bounds of the largest / smallest singular value of N_J's linear part over the interval
       (products along J's root path of the factors' ``n0`` and ``1 / n0`` of the inverse, times
-      the world transform's); 1 and 1 without scale.
+      the world transform's).  When every factor on the path is a rotation times a uniform scale
+      at all times (a uniform scale stays uniform under lerp and half rounding) and so is the
+      world transform, N_J is a similarity at each time and the ratio ``s_lo / s_hi`` is exactly 1.
+      Non-uniform scales on the path make the certificate conservative (it may then report an
+      interval as undecided).
     * Chord deviation of a ball's copy: ``delta_b`` of :func:`runtime.kernels.bounds._chain_bounds`.
     * Level A1 (continuous test K): ``|y_v(tau) - c| <= a_P max_b (max(e0_b, e1_b) + delta_b +
       lam_b r_b) + eps_P |c_P|`` (the ball's centre is within ``delta_b`` of its chord, whose points
@@ -329,8 +336,17 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     s_lo *= _sigma_min(wl)
     J = rig.part_joint
     r = rig.part_radii
+    # where every factor of J's root path (and the world transform) is a rotation times a uniform
+    # scale at every time, N_J is a similarity: mu(N_J) = ||L(N_J)|| at each time, ratio 1
+    iso = np.ones((I, len(rig.bind)), bool)
+    for j in range(len(rig.bind)):
+        for k in _ancestors(rig.parents, j):
+            iso[:, j] &= fac["iso"][:, k]
+    sw = np.linalg.svd(wl, compute_uv=False)
+    iso &= bool(sw[0] - sw[-1] <= 1e-12 * sw[0])
+    ratio = np.where(iso, 1.0, s_lo / s_hi)
     if rho is None:
-        rho = (r[None] * (1.0 + tol_rel) * s_lo[:, J] + tol_abs) / s_hi[:, J]
+        rho = (r[None] * (1.0 + tol_rel) * ratio[:, J] * (1 - 1e-12) + tol_abs / s_hi[:, J])
     rho = np.broadcast_to(np.asarray(rho, dtype=np.float64), (I, P)).copy()
     # level A1: the continuous test K
     kc = np.maximum(e0, e1) + delta + pert + lam * bd.pj_radius[None]
