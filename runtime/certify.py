@@ -20,6 +20,7 @@ import numpy as np
 from .kernels import bounds as B
 from .kernels import pose as PK
 from .kernels import skin as SK
+from .schema import parents_first
 
 #: Subdivision depth of one sample interval before the certificate gives up (2^8 sub-steps).
 MAX_DEPTH = 8
@@ -65,6 +66,7 @@ class Rig:
         self.geom_bind = np.ascontiguousarray(self.geom_bind, dtype=np.float64)
         self.rest_local = np.ascontiguousarray(self.rest_local, dtype=np.float64)
         self.parents = np.asarray(self.parents, dtype=np.int64)
+        self.topo = parents_first(self.parents)
         self.part_joint = np.asarray(self.part_joint, dtype=np.int64)
         self.part_centers = np.ascontiguousarray(self.part_centers, dtype=np.float64).reshape(-1, 3)
         self.part_radii = np.ascontiguousarray(self.part_radii, dtype=np.float64)
@@ -324,13 +326,16 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     if M:
         B._chain_bounds(fac["L0"], fac["L1"], fac["Li0"], fac["Li1"], fac["fw"], fac["iv"], fac["dt"], fac["eps"],
                         off, pj, pd, bd.pj_center, bd.pj_radius, pair_part, bd.part_centers, e0, e1, delta, lam, pert)
-    # scale bounds of N_J over each interval (products along the root path)
-    s_hi = np.ones((I, len(rig.bind)))
-    s_lo = np.ones((I, len(rig.bind)))
-    for j in range(len(rig.bind)):
-        for k in _ancestors(rig.parents, j):
-            s_hi[:, j] *= fac["fw"][:, k, 0]
-            s_lo[:, j] /= fac["iv"][:, k, 0]
+    # scale bounds of N_J over each interval (products along the root path, parents first)
+    Jn = len(rig.bind)
+    s_hi = np.empty((I, Jn))
+    s_lo = np.empty((I, Jn))
+    iso = np.empty((I, Jn), bool)
+    for j in rig.topo:
+        p = rig.parents[j]
+        s_hi[:, j] = fac["fw"][:, j, 0] * (s_hi[:, p] if p >= 0 else 1.0)
+        s_lo[:, j] = (s_lo[:, p] if p >= 0 else 1.0) / fac["iv"][:, j, 0]
+        iso[:, j] = fac["iso"][:, j] & (iso[:, p] if p >= 0 else True)
     wl = rig.world[:3, :3]
     s_hi *= _norm2(wl)
     s_lo *= _sigma_min(wl)
@@ -338,10 +343,6 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     r = rig.part_radii
     # where every factor of J's root path (and the world transform) is a rotation times a uniform
     # scale at every time, N_J is a similarity: mu(N_J) = ||L(N_J)|| at each time, ratio 1
-    iso = np.ones((I, len(rig.bind)), bool)
-    for j in range(len(rig.bind)):
-        for k in _ancestors(rig.parents, j):
-            iso[:, j] &= fac["iso"][:, k]
     sw = np.linalg.svd(wl, compute_uv=False)
     iso &= bool(sw[0] - sw[-1] <= 1e-12 * sw[0])
     ratio = np.where(iso, 1.0, s_lo / s_hi)
@@ -355,7 +356,9 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     K1 = np.full((I, P), np.inf)
     if M:
         K1[:, nonempty] = np.maximum.reduceat(kc, starts[nonempty], axis=1)
-    K1 = np.where(nonempty[None], bd.part_wabs[None] * K1, 0.0) \
+    with np.errstate(invalid="ignore"):
+        K1 = np.where(nonempty[None], bd.part_wabs[None] * K1, 0.0)
+    K1 = K1 \
         + bd.part_wdev[None] * np.linalg.norm(bd.part_centers, axis=1)[None]  # an empty part holds trivially
     # level A2: chords of the sampled bounds
     own = bd.pj_joint == J[pair_part] if M else np.zeros(0, bool)
@@ -392,16 +395,18 @@ class _Mats:
 
     def __init__(self, rig, clip, times, fac):
         self.rig, self.clip = rig, clip
+        self.frame = {float(t): i for i, t in enumerate(times)}
+        self.locals = fac["locals"]
         self.skel = {}
-        for i, t in enumerate(times):
-            self.skel[float(t)] = PK.compose(fac["locals"][i], rig.parents)
         self.index = {}
         self.rows = []
 
     def skel_at(self, t):
         t = float(t)
-        if t not in self.skel:
-            self.skel[t] = PK.compose(PK.locals_at(self.clip, [t], self.rig.rest_local)[0], self.rig.parents)
+        if t not in self.skel:  # a sample's local transforms are known; others are interpolated
+            i = self.frame.get(t)
+            local = self.locals[i] if i is not None else PK.locals_at(self.clip, [t], self.rig.rest_local)[0]
+            self.skel[t] = PK.compose(local, self.rig.parents, self.rig.topo)
         return self.skel[t]
 
     def get(self, t, joint):
