@@ -188,7 +188,8 @@ def comparable(reports) -> list:
         d = json.loads(json.dumps(r.to_dict(), default=lambda o: o.item() if hasattr(o, "item") else str(o)))
         for k in TIMING_KEYS:
             d["stats"].pop(k, None)
-        d["stats"].get("frameproof", {}).pop("seconds", None)
+        for k in ("seconds", "continuous_seconds"):
+            d["stats"].get("frameproof", {}).pop(k, None)
         out.append(d)
     return out
 
