@@ -145,7 +145,7 @@ class Proof:
                 "vertex_frames": self.vertex_frames, "skinned_vertex_frames": self.skinned_vertex_frames,
                 "tiers": dict(self.tiers), "continuous": self.continuous,
                 "intervals": dict(self.intervals) if self.continuous else {},
-                "seconds": round(self.seconds, 4), "continuous_seconds": round(self.continuous_seconds, 4),
+                "seconds": round(self.seconds, 4),
                 "tolerance": self.tolerance, "checked": self.checked, "not_checked": self.not_checked}
 
 
