@@ -9,8 +9,6 @@ import itertools
 
 import numpy as np
 
-from pipeline.model import skel_transforms
-
 
 # -- weld -------------------------------------------------------------------------------------
 
@@ -125,12 +123,67 @@ def skin_joint_space(mesh, joint, skel):
     return out
 
 
+def compose(local, parents):
+    """(..., b, 4, 4) column-vector joint-local -> skeleton space, a python loop (parents first)."""
+    local = np.asarray(local, dtype=np.float64)
+    out = np.empty_like(local)
+    for j, p in enumerate(parents):
+        out[..., j, :, :] = local[..., j, :, :] if p < 0 else out[..., p, :, :] @ local[..., j, :, :]
+    return out
+
+
 def all_poses(mesh):
     """Skeleton transforms of the bind pose and of every clip frame, (F, b, 4, 4)."""
     poses = [mesh.bind_transforms[None]]
     for c in mesh.clips:
-        poses.append(skel_transforms(c.local, mesh.parents))
+        poses.append(compose(c.local, mesh.parents))
     return np.concatenate(poses)
+
+
+def naive_lbs(points, joint_indices, joint_weights, mats):
+    """Linear-blend skinning by its definition: ``sum_k w[v, k] * mats[f, j[v, k]] @ (p[v], 1)``
+    for every pose ``f`` of column-vector ``mats`` (F, J, 4, 4); (F, n, 3) float64.  Python loops
+    over poses and influences; a zero weight contributes nothing (whatever its joint index)."""
+    p = np.c_[np.asarray(points, dtype=np.float64), np.ones(len(points))]
+    mats = np.asarray(mats, dtype=np.float64)
+    out = np.zeros((len(mats), len(p), 3))
+    for f in range(len(mats)):
+        for k in range(joint_indices.shape[1]):
+            w = np.asarray(joint_weights[:, k], dtype=np.float64)
+            j = np.where(w != 0, joint_indices[:, k], 0)
+            out[f] += w[:, None] * np.einsum("nij,nj->ni", mats[f][j][:, :3], p)
+    return out
+
+
+def trs(t, q, s):
+    """(..., 4, 4) column-vector T R S from translations, (x, y, z, w) quaternions, scales
+    (the unit-quaternion rotation matrix written out)."""
+    q = np.asarray(q, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    x, y, z, w = np.moveaxis(q, -1, 0)
+    R = np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+                  np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+                  np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], -2)
+    m = np.zeros(q.shape[:-1] + (4, 4))
+    m[..., :3, :3] = R * np.asarray(s, dtype=np.float64)[..., None, :]
+    m[..., :3, 3] = t
+    m[..., 3, 3] = 1
+    return m
+
+
+def slerp(q0, q1, a):
+    """Shortest-arc slerp of (..., 4) quaternions by ``a`` (textbook formula, sign flip)."""
+    q0 = np.asarray(q0, dtype=np.float64)
+    q1 = np.asarray(q1, dtype=np.float64)
+    d = np.sum(q0 * q1, -1, keepdims=True)
+    q1 = np.where(d < 0, -q1, q1)
+    d = np.abs(d)
+    th = np.arccos(np.clip(d, -1, 1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s0 = np.where(th > 1e-9, np.sin((1 - a) * th) / np.sin(th), 1 - a)
+        s1 = np.where(th > 1e-9, np.sin(a * th) / np.sin(th), a)
+    q = s0 * q0 + s1 * q1
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
 # -- minimal sphere ---------------------------------------------------------------------------

@@ -76,7 +76,8 @@ class UsdSkelReference:
         return p[:, :3]
 
     def skel_transforms(self, t):
-        return np.asarray(self.sq.ComputeJointSkelTransforms(t))
+        """(J, 4, 4) column-vector (USD hands row-vector matrices to numpy)."""
+        return np.asarray(self.sq.ComputeJointSkelTransforms(t)).transpose(0, 2, 1)
 
 
 def tol(col):
@@ -173,9 +174,9 @@ def test_spheres_move_with_joints(odd_path, creature):
         for clip in col.clips:
             ft = col.frame_times(clip)
             pose = col.pose(clip, ft[len(ft) // 2] + 0.5)
-            world = pose.skel_transforms[d.part_joint] @ pose.local_to_world
-            c = np.einsum("pi,pij->pj", np.c_[d.part_centers, np.ones(len(d.part_centers))], world)[:, :3]
-            s = np.linalg.norm(world[:, :3, :3], axis=2).max(1)
+            world = pose.local_to_world @ pose.skel_transforms[d.part_joint]  # column-vector
+            c = np.einsum("pij,pj->pi", world, np.c_[d.part_centers, np.ones(len(d.part_centers))])[:, :3]
+            s = np.linalg.norm(world[:, :3, :3], axis=1).max(1)
             assert np.allclose(pose.spheres[:, :3], c, atol=1e-9)
             assert np.allclose(pose.spheres[:, 3], d.part_radii * s)
             # the culling spheres bound every vertex of their part
@@ -380,3 +381,140 @@ def test_surface_points_carried_by_skin(limb):
     assert np.allclose(SurfacePoints(anchors.triangles, anchors.barycentric[:, 1:]).at(b), moved)
     with pytest.raises(ValueError):
         a.track([10 ** 9], [[1, 0, 0]])
+
+
+# -- any pose (IK, ragdoll): pose_from_joints --------------------------------------------------
+
+
+def _random_locals(col, rng, max_angle=np.pi):
+    """Rest local transforms with every joint turned by a random rotation of up to ``max_angle``."""
+    from scipy.spatial.transform import Rotation
+
+    rest = col.rest_local
+    J = len(rest)
+    axis = rng.normal(size=(J, 3))
+    rv = axis / np.linalg.norm(axis, axis=1, keepdims=True) * rng.uniform(0, max_angle, size=(J, 1))
+    local = rest.copy()
+    local[:, :3, :3] = rest[:, :3, :3] @ Rotation.from_rotvec(rv).as_matrix()
+    return local
+
+
+def _naive_points(col, local):
+    """Skinned points of a joint-local pose with numpy only (column-vector, stage space)."""
+    import naive
+
+    d = col.data
+    skel = naive.compose(local[None], d.parents)[0]
+    world = (d.static_local_to_world if d.static_local_to_world is not None else np.eye(4))
+    y = naive.naive_lbs(d.rest_points, d.joint_indices, d.joint_weights, (world @ skel @ d.inv_bind @ d.geom_bind)[None])
+    return y[0]
+
+
+@pytest.mark.parametrize("name", ["creature", "limb", "odd"])
+def test_pose_from_joints_spheres_hold_and_queries_are_exact(name, creature_path, limb_path, odd_path):
+    col = load_collider({"creature": creature_path, "limb": limb_path, "odd": odd_path}[name])
+    d = col.data
+    rng = np.random.default_rng(11)
+    pose = None
+    refits = 0
+    for trial in range(6):
+        local = _random_locals(col, rng)
+        pose = col.pose_from_joints(local, out=pose)
+        ref = _naive_points(col, local)
+        assert np.abs(pose.points - ref).max() < tol(col)
+        assert pose.refit.shape == (col.parts,) and pose.refit.dtype == bool
+        refits += int(pose.refit.sum())
+        for p in range(col.parts):
+            v = d.verts[d.vert_offsets[p]:d.vert_offsets[p + 1]]
+            far = np.linalg.norm(ref[v] - pose.spheres[p, :3], axis=1).max()
+            assert far <= pose.spheres[p, 3] * (1 + 1e-9), (p, far, pose.spheres[p, 3])
+            assert far <= pose.cull[p, 3]
+        # the stored sphere moved with its joint, or grown (never shrunk)
+        stored = col.pose_from_joints(local).spheres  # same numbers on a fresh pose
+        assert np.array_equal(stored, pose.spheres)
+        # queries on the lazily skinned pose (query first) equal brute force and numpy
+        fresh = col.pose_from_joints(local)
+        o, dirs = random_rays(pose, rng, 120)
+        a = fresh.raycast(o, dirs)
+        b = pose.raycast(o, dirs, backend="brute")
+        assert np.array_equal(a.triangle, b.triangle) and np.array_equal(a.distance, b.distance)
+        check_rays_against_naive(pose, o[:30], dirs[:30])
+        c = pose.points[rng.integers(len(pose.points))] + rng.normal(scale=0.01 * col.size(), size=3)
+        check_contacts(pose, c, 0.05 * col.size())
+    assert refits > 0  # random 180-degree poses do grow some spheres
+
+
+def test_pose_from_joints_trs_and_validation(limb):
+    from scipy.spatial.transform import Rotation
+
+    rest = limb.rest_local
+    J = len(rest)
+    q = Rotation.random(J, random_state=3).as_quat()
+    a = limb.pose_from_joints(rotations=q)
+    local = rest.copy()
+    local[:, :3, :3] = Rotation.from_quat(q).as_matrix()
+    b = limb.pose_from_joints(local)
+    assert np.allclose(a.points, b.points, atol=1e-6) and np.allclose(a.spheres, b.spheres)
+    rest_pose = limb.pose_from_joints(rest)
+    assert not rest_pose.refit.any()  # the rest pose is a pose the spheres were fitted for
+    assert np.allclose(rest_pose.points, limb.pose(None).points, atol=1e-6)
+    with pytest.raises(ValueError, match="skeleton joint"):
+        limb.pose_from_joints(rest[:-1])
+    with pytest.raises(ValueError, match="row-vector"):
+        limb.pose_from_joints(rest.transpose(0, 2, 1) + _with_translation(rest))
+    with pytest.raises(ValueError, match="rotations"):
+        limb.pose_from_joints(translations=rest[:, :3, 3])
+    assert limb.joints[0] == limb.data.joints[0]
+
+
+def _with_translation(rest):
+    """A row-vector matrix with a translation in its last row (what a USD-layout array looks like)."""
+    m = np.zeros_like(rest)
+    m[:, 3, 0] = 1.0
+    return m
+
+
+# -- the proof's tolerance, pinned on the real samples (audit A3) ------------------------------
+
+
+@pytest.mark.parametrize("name", ["creature", "limb"])
+def test_a_radius_shrunk_by_a_thousandth_fails_and_usd_agrees(name, imported, tmp_path):
+    """Shrinking every part radius by 0.1 % of itself fails validation (COL403, or COL407 between
+    frames), with the proof's own kernel; usd-core's skinning (UsdSkel.SkinningQuery) agrees that the
+    named vertex is outside the shrunk sphere by the reported excess, and inside the written one."""
+    from validators import check_asset
+
+    path = imported(name, "glb")[1]
+    assert check_asset(path).passed
+    stage = Usd.Stage.Open(str(path))
+    mesh = next(p for p in stage.Traverse() if p.GetTypeName() == "Mesh")
+    r = np.asarray(mesh.GetAttribute("colossus:parts:radii").Get(), dtype=np.float64)
+    mesh.GetAttribute("colossus:parts:radii").Set(Vt.FloatArray((r * (1 - 1e-3)).astype(np.float32).tolist()))
+    bad = tmp_path / "shrunk.usda"
+    stage.GetRootLayer().Export(str(bad))
+    rep = check_asset(bad, select=["COL403", "COL407"])
+    assert not rep.passed
+    fs = rep.by_code("COL403")
+    assert fs, "the frames themselves must fail: the spheres are tight at some frame"
+    col = load_collider(bad)
+    ref = UsdSkelReference(bad)
+    failed_parts = {f.part for f in fs}
+    assert len(failed_parts) >= max(1, col.parts // 2)  # most parts are tight somewhere
+    for f in fs:
+        ref.use_clip(f.clip)
+        pts = ref.points(f.time)
+        skel = ref.skel_transforms(f.time)  # column-vector
+        world = pose_world(col, f.time) @ skel[col.data.part_joint[f.part]]
+        c = world[:3, :3] @ col.data.part_centers[f.part] + world[:3, 3]
+        R = float(np.float32(r[f.part] * (1 - 1e-3))) * np.linalg.norm(world[:3, :3], axis=0).max()
+        excess = np.linalg.norm(pts[f.vertex] - c) - R
+        assert excess == pytest.approx(f.excess, abs=2e-6 * col.size())
+        assert excess > 0
+        R0 = float(np.float32(r[f.part])) * np.linalg.norm(world[:3, :3], axis=0).max()
+        v = col.data.verts[col.data.vert_offsets[f.part]:col.data.vert_offsets[f.part + 1]]
+        assert np.linalg.norm(pts[v] - c, axis=1).max() <= R0 * (1 + 1e-5) + 1e-6 * col.size()
+
+
+def pose_world(col, t):
+    d = col.data
+    return d.static_local_to_world if d.static_local_to_world is not None else np.eye(4)

@@ -91,14 +91,14 @@ def naive_sphere_contacts(points, triangles, center, radius):
 
 
 def naive_skin(rest, ji, jw, skel, inv_bind, geom_bind, local_to_world):
-    """Linear-blend skinning, a python loop over influences (row-vector matrices)."""
-    hom = np.c_[np.asarray(rest, np.float64), np.ones(len(rest))] @ geom_bind
+    """Linear-blend skinning, a python loop over influences (column-vector matrices)."""
+    hom = np.c_[np.asarray(rest, np.float64), np.ones(len(rest))] @ geom_bind.T
     out = np.zeros((len(rest), 4))
     for i in range(ji.shape[1]):
-        m = inv_bind[ji[:, i]] @ skel[ji[:, i]]
-        out += jw[:, i, None] * np.einsum("vi,vij->vj", hom, m)
+        m = skel[ji[:, i]] @ inv_bind[ji[:, i]]
+        out += jw[:, i, None] * np.einsum("vij,vj->vi", m, hom)
     out[:, 3] = 1.0
-    return (out @ local_to_world)[:, :3]
+    return (out @ local_to_world.T)[:, :3]
 
 
 # -- character controller (runtime.controller's kernels) --------------------------------------

@@ -150,7 +150,7 @@ def test_subframes_check_in_between_times(asset):
     p3 = fp.prove(asset, subframes=3)
     assert p0.subframe_times == 0 and p3.subframe_times == 3 * (23 + 11)
     assert p3.frames == p0.frames == 36
-    assert any("in-between" in s for s in p0.not_checked)
+    assert p0.not_checked == [] and any("certified for every time in [first, last]" in s for s in p0.checked)
     assert any("3 in-between" in s for s in p3.checked)
     times, fidx, is_sub = fp.clip_times(np.array([0.0, 1.0, 2.0]), 3)
     np.testing.assert_allclose(times, [0, 0.25, 0.5, 0.75, 1, 1.25, 1.5, 1.75, 2])
@@ -167,7 +167,8 @@ def test_subframes_catch_a_failure_between_frames():
     c = np.array(col.GetAttribute("colossus:parts:centers").Get())
     c[:] = [0.5, 0.5, 0]  # off-axis centres: the straight pose is farthest from them
     col.GetAttribute("colossus:parts:centers").Set(Vt.Vec3fArray.FromNumpy(c.astype(np.float32)))
-    tight = fp.prove(LoadedAsset(stage)).tightest
+    a = LoadedAsset(stage)
+    tight = fp.tightest(a, fp.prove(a, continuous=False), 0.0)  # exact, every part
     col.GetAttribute("colossus:parts:radii").Set(Vt.FloatArray.FromNumpy((tight * (1 + 1e-6) + 1e-5).astype(np.float32)))
     r0 = check_asset(stage, subframes=0, select=["COL403"])
     assert r0.passed, [f.message for f in r0.findings]
@@ -177,4 +178,9 @@ def test_subframes_catch_a_failure_between_frames():
     fs = r1.by_code("COL403")
     assert fs, "the in-between pose must be caught"
     assert {f.time for f in fs} == {0.5} and {f.frame for f in fs} == {0}
-    assert "1 in-between" in r1.stats["frameproof"]["checked"][1]
+    assert any("1 in-between" in c for c in r1.stats["frameproof"]["checked"])
+    # the continuous certificate (on by default) catches it without any subframe, with its interval
+    r2 = check_asset(stage, select=["COL407"])
+    fs = r2.by_code("COL407")
+    assert fs and {tuple(f.interval) for f in fs} == {(0.0, 1.0)} and all(f.excess > 0 for f in fs)
+    assert r2.to_dict()["findings"][0]["interval"] == [0.0, 1.0]  # the contract's JSON field
