@@ -1,5 +1,4 @@
 import json
-import os
 import pathlib
 
 import numpy as np

@@ -227,10 +227,6 @@ def check_hits(pose, o, d, h, max_distance=np.inf, first_part=None):
     return h
 
 
-def check_rays_against_naive(pose, o, d, max_distance=np.inf):
-    return check_hits(pose, o, d, pose.raycast(o, d, max_distance), max_distance)
-
-
 def sort_contacts(cs):
     o = np.argsort(cs.triangle)
     return SphereContacts(cs.triangle[o], cs.point[o], cs.normal[o], cs.depth[o], cs.barycentric[o])
@@ -252,10 +248,6 @@ def check_contact_result(pose, center, radius, got):
         assert np.allclose(cs.normal[far], ((center - cs.point) / np.linalg.norm(center - cs.point, axis=1)[:, None])[far])
         assert np.allclose(pose.track(cs.triangle, cs.barycentric), cs.point, atol=1e-6)
     return cs
-
-
-def check_contacts(pose, center, radius):
-    return check_contact_result(pose, center, radius, pose.sphere_contacts(center, radius))
 
 
 @pytest.mark.parametrize("key", list(QUERY_ASSETS))

@@ -120,13 +120,16 @@ class ClipDistances:
 
     times (f,), distance (f, P) stage units, vertex (f, P) its index, scale (f, P) the largest
     axis scale of the part joint's joint-to-stage transform (the contract's radius multiplier),
-    world_radius (f, P) = radius x scale."""
+    world_radius (f, P) = radius x scale, centers (f, P, 3) the moving centres, points (f, V, 3)
+    the skinned points (stage space)."""
 
     times: np.ndarray
     distance: np.ndarray
     vertex: np.ndarray
     scale: np.ndarray
     world_radius: np.ndarray
+    centers: np.ndarray
+    points: np.ndarray
 
     @property
     def excess(self):
@@ -146,16 +149,18 @@ def part_distances(path, radii=None):
         times = ref.times(clip)
         P = len(parts.joints)
         D, V, S = np.zeros((len(times), P)), np.zeros((len(times), P), dtype=np.int64), np.zeros((len(times), P))
+        C = np.zeros((len(times), P, 3))
+        X = np.zeros((len(times), len(ref.rest), 3))
         for f, t in enumerate(times):
-            pts = ref.points(t)
+            X[f] = pts = ref.points(t)
             jw = ref.joint_world(t)
             for p, j in enumerate(parts.joints):
-                c = np.append(parts.centers[p], 1.0) @ jw[j]
-                d = np.linalg.norm(pts[parts.vertices[p]] - c[:3], axis=1)
+                C[f, p] = c = (np.append(parts.centers[p], 1.0) @ jw[j])[:3]
+                d = np.linalg.norm(pts[parts.vertices[p]] - c, axis=1)
                 D[f, p] = d.max()
                 V[f, p] = parts.vertices[p][d.argmax()]
                 S[f, p] = np.linalg.norm(jw[j][:3, :3], axis=1).max()
-        out[clip] = ClipDistances(times, D, V, S, S * radii)
+        out[clip] = ClipDistances(times, D, V, S, S * radii, C, X)
     return out, parts, ref.model_size()
 
 
