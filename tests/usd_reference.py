@@ -26,16 +26,21 @@ class UsdSkelReference:
     def __init__(self, path):
         self.stage = Usd.Stage.Open(str(path))
         self.stage.SetEditTarget(self.stage.GetSessionLayer())
-        self.root = UsdSkel.Root(self.stage.GetDefaultPrim())
-        self.skel = next(UsdSkel.Skeleton(p) for p in self.stage.Traverse() if p.IsA(UsdSkel.Skeleton))
-        self.mesh = next(p for p in self.stage.Traverse() if p.IsA(UsdGeom.Mesh))
+        prims = list(self.stage.Traverse())
+        dp = self.stage.GetDefaultPrim()
+        self.root = UsdSkel.Root(dp if dp.IsA(UsdSkel.Root) else next(p for p in prims if p.IsA(UsdSkel.Root)))
+        self.skel = next(UsdSkel.Skeleton(p) for p in prims if p.IsA(UsdSkel.Skeleton))
+        self.mesh = next(p for p in prims if p.IsA(UsdGeom.Mesh))
         self.rest = Vt.Vec3fArray(self.mesh.GetAttribute("points").Get())
-        self.clips = [c.GetName() for c in self.root.GetPrim().GetChildren() if c.IsA(UsdSkel.Animation)]
+        # clips: the SkelAnimation prims (the contract puts them under the SkelRoot; Blender's
+        # USD export under the Skeleton), in file order
+        self._anims = {p.GetName(): p for p in prims if p.IsA(UsdSkel.Animation)}
+        self.clips = list(self._anims)
         self._populate()
 
     def use_clip(self, clip):
         rel = UsdSkel.BindingAPI(self.skel.GetPrim()).GetAnimationSourceRel()
-        rel.SetTargets([] if clip is None else [self.root.GetPrim().GetPath().AppendChild(clip)])
+        rel.SetTargets([] if clip is None else [self._anims[clip].GetPath()])
         return self._populate()
 
     def _populate(self):
@@ -47,7 +52,7 @@ class UsdSkelReference:
 
     def times(self, clip):
         """(f,) the clip's time samples (its frames)."""
-        anim = self.root.GetPrim().GetChild(clip)
+        anim = self._anims[clip]
         return np.array(sorted(set().union(*(a.GetTimeSamples() for a in anim.GetAttributes()))), dtype=np.float64)
 
     def local_to_world(self, t):
