@@ -85,8 +85,9 @@ def test_bad_files(tmp_path, content):
 
 def test_verify_rejects_broken_asset(tmp_path, limb_path):
     """verify=require_passing raises on an asset the error rules reject; without it it still loads."""
+    from usd_fixture import open_copy
     from validators import require_passing
-    stage = Usd.Stage.Open(str(limb_path))
+    stage = open_copy(limb_path)  # never edit the layer the session's colliders share
     mesh = next(p for p in stage.Traverse() if p.GetTypeName() == "Mesh")
     radii = np.asarray(mesh.GetAttribute("colossus:parts:radii").Get()) * 0.3
     mesh.GetAttribute("colossus:parts:radii").Set(Vt.FloatArray(radii.tolist()))
