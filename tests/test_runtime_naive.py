@@ -141,3 +141,19 @@ def test_raycast_reference_on_a_square():
     assert np.allclose(dist[:2], [1, 2]) and dist[2] == np.inf
     assert list(tri) == [0, 1, -1]
     assert np.allclose(bary[0] @ pts[tris[0]], [0.75, 0.25, 0])
+
+
+def test_references_import_nothing_of_the_project():
+    """The slow references and the usd-core reference must be independent of what they judge:
+    none of these files imports a project package (tests/reference has its own such test)."""
+    import ast
+    import pathlib
+
+    here = pathlib.Path(__file__).parent
+    for name in ("naive.py", "test_runtime_naive.py", "usd_reference.py", "usd_fixture.py"):
+        tree = ast.parse((here / name).read_text(), filename=name)
+        for node in ast.walk(tree):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+                [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else [])
+            for n in names:
+                assert n.split(".")[0] not in {"pipeline", "validators", "runtime"}, (name, node.lineno, n)
