@@ -160,7 +160,7 @@ def test_proof_memory_does_not_grow_with_frames():
     finally:
         tracemalloc.stop()
     assert probe_peak >= full
-    assert proof.frames == 600 and proof.vertex_frames == 600 * len(asset.part_vertices[1])
+    assert proof.frames == 600
     assert peak < full / 8, f"prove() peaked at {peak / 1e6:.1f} MB, all skinned frames are {full / 1e6:.1f} MB"
 
 
