@@ -17,7 +17,7 @@ from runtime.controller import (FALLING, HANGING, HOLDING, SLIDING, STANDING, Ch
                                 Intent, carry_point, resolve_push)
 from runtime.controller import _along, _surface_frame
 from runtime.script import start_position
-from test_runtime import UsdSkelReference
+from usd_reference import UsdSkelReference
 from test_runtime_naive import (closest_point_on_triangles, inside_closed_mesh, naive_along,
                                 naive_carry, naive_push, naive_raycast)
 

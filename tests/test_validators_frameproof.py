@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from pxr import Gf, Usd, UsdSkel, Vt
 
-from usd_fixture import build_test_stage, clip_skel, naive_skin, open_copy
+from usd_fixture import build_test_stage, clip_skel, naive_skin
+from usd_reference import part_distances, tightest
 from validators import frameproof as fp
 from validators.asset import LoadedAsset
 
@@ -137,12 +138,39 @@ def test_chunking_does_not_change_the_result(asset):
     np.testing.assert_array_equal(whole.tightest, tiny.tightest)
 
 
-def test_chunk_size_bounds_memory():
-    # a 100,000-vertex, 2,000-frame asset: the proof holds at most one chunk of joint matrices,
-    # never the (2000, 100000, 3) skinned points.
-    c = fp.chunk_size(joint_count=200, part_count=200)
-    assert 1 <= c <= 256
-    assert c * 200 * 16 * 8 * 3 <= 32 * 1024 * 1024
+def test_proof_memory_does_not_grow_with_frames():
+    """The proof never holds the skinned points of all frames: measured with tracemalloc (which
+    sees every numpy allocation) on a 2,402-vertex, 600-frame asset whose skinned points would
+    take 17 MB, prove()'s peak stays a small fraction of that (measured 0.6 MB; skinning each
+    chunk with skin_frames first would peak at 32 MB)."""
+    import tracemalloc
+
+    asset = LoadedAsset(build_test_stage(rings=60, segments=40, clips=(("wiggle", 600),)))
+    full = 600 * asset.n * 3 * 4  # float32 (frames, vertices, 3)
+    assert asset.n == 2402 and full > 16e6
+    fp.prove(LoadedAsset(build_test_stage(clips=(("wiggle", 3),))))  # lazy imports, kernel loading
+    tracemalloc.start()
+    try:
+        probe = np.empty((600, asset.n, 3), np.float32)  # the instrument sees such an array
+        probe_peak = tracemalloc.get_traced_memory()[1]
+        del probe
+        tracemalloc.reset_peak()
+        proof = fp.prove(asset)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert probe_peak >= full
+    assert proof.frames == 600
+    assert peak < full / 8, f"prove() peaked at {peak / 1e6:.1f} MB, all skinned frames are {full / 1e6:.1f} MB"
+
+
+def test_chunk_size_respects_the_byte_budget():
+    from validators import tolerances as tol
+    for joints, parts in ((200, 200), (3, 3), (5000, 1000)):
+        c = fp.chunk_size(joint_count=joints, part_count=parts)
+        assert 1 <= c <= tol.CHUNK_FRAMES
+        # either the budget holds, or a single frame already exceeds it (never zero frames)
+        assert c == 1 or c * joints * 16 * 8 * 3 <= tol.CHUNK_BYTES
 
 
 def test_subframes_check_in_between_times(asset):
@@ -158,7 +186,7 @@ def test_subframes_check_in_between_times(asset):
     np.testing.assert_array_equal(is_sub, [0, 1, 1, 1, 0, 1, 1, 1, 0])
 
 
-def test_subframes_catch_a_failure_between_frames():
+def test_subframes_catch_a_failure_between_frames(tmp_path):
     """Frames at +-0.9 rad, straight in between; off-axis sphere centres with radii exactly as
     tight as the frames allow, so only the in-between (straight) pose fails."""
     from validators import check_asset
@@ -167,8 +195,10 @@ def test_subframes_catch_a_failure_between_frames():
     c = np.array(col.GetAttribute("colossus:parts:centers").Get())
     c[:] = [0.5, 0.5, 0]  # off-axis centres: the straight pose is farthest from them
     col.GetAttribute("colossus:parts:centers").Set(Vt.Vec3fArray.FromNumpy(c.astype(np.float32)))
-    a = LoadedAsset(stage)
-    tight = fp.tightest(a, fp.prove(a, continuous=False), 0.0)  # exact, every part
+    # the tightest radii that hold on the two frames, from usd-core's skinning (not the proof's)
+    path = str(tmp_path / "swing.usda")
+    stage.GetRootLayer().Export(path)
+    tight = tightest(part_distances(path)[0])
     col.GetAttribute("colossus:parts:radii").Set(Vt.FloatArray.FromNumpy((tight * (1 + 1e-6) + 1e-5).astype(np.float32)))
     r0 = check_asset(stage, subframes=0, select=["COL403"])
     assert r0.passed, [f.message for f in r0.findings]
