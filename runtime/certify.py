@@ -166,7 +166,7 @@ def sampled(rig: Rig, skel, tol_abs: float, tol_rel: float, exact=None) -> Sampl
 # -------------------------------------------------------------------- continuous time
 def factor_bounds(clip, times, rest_local):
     """Per sample interval and joint: the local transforms at both ends and the bounds the chain
-    recursion (:func:`runtime.kernels.bounds._chain_bounds`) needs.
+    recursion (:func:`runtime.kernels.bounds._chain_bounds_serial`) needs.
 
     For a joint the clip animates, over an interval with ends ``(t0, q0, s0)``, ``(t1, q1, s1)``
     (time normalised to [0, 1]): the translation moves by ``dt = |t1 - t0|`` at constant speed;
@@ -191,7 +191,7 @@ def factor_bounds(clip, times, rest_local):
 
     Returns a dict of (I, J, ...) float64 arrays: L0, L1, Li0, Li1, fw, iv, dt, eps."""
     times = np.asarray(times, dtype=np.float64)
-    L = PK.locals_at(clip, times, rest_local)
+    L, t, q, s = PK.locals_at(clip, times, rest_local, trs=True)
     Li = np.linalg.inv(L)
     I, J = len(times) - 1, len(rest_local)
     fw = np.zeros((I, J, 3))
@@ -204,7 +204,6 @@ def factor_bounds(clip, times, rest_local):
     fw[:, :, 0] = _norm2(lin)[None]
     iv[:, :, 0] = _norm2(np.linalg.inv(lin))[None]
     if len(clip.anim_to_skel) and I > 0:
-        t, q, s = PK.trs_at(clip, times)
         a = clip.anim_to_skel
         qn = q / np.linalg.norm(q, axis=-1, keepdims=True)
         q0, q1 = qn[:-1], qn[1:]
@@ -282,7 +281,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
       world transform, N_J is a similarity at each time and the ratio ``s_lo / s_hi`` is exactly 1.
       Non-uniform scales on the path make the certificate conservative (it may then report an
       interval as undecided).
-    * Chord deviation of a ball's copy: ``delta_b`` of :func:`runtime.kernels.bounds._chain_bounds`.
+    * Chord deviation of a ball's copy: ``delta_b`` of :func:`runtime.kernels.bounds._chain_bounds_serial`.
     * Level A1 (continuous test K): ``|y_v(tau) - c| <= a_P max_b (max(e0_b, e1_b) + delta_b +
       lam_b r_b) + eps_P |c_P|`` (the ball's centre is within ``delta_b`` of its chord, whose points
       are within the larger end distance; the ball's points within ``lam_b r_b`` of it).
@@ -292,7 +291,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
       sampled proof's bounds of the farthest vertex at both ends, in J space), so the bound is
       ``max(D0, D1) + min(a_P max_b delta_b, sum_b wmax_b delta_b)``.
     * Level B: the same per vertex, with both ends skinned exactly
-      (:func:`runtime.kernels.bounds._chord_tasks`).
+      (:func:`runtime.kernels.bounds._chord_tasks_serial`).
     * Level C: halve the interval (UsdSkel's interpolation evaluated at the midpoint by the
       runtime's port, :mod:`runtime.kernels.pose`); on a sub-interval of fraction f the
       recursion's velocities scale by f and accelerations by f^2 (the magnitudes bounded on the
@@ -324,7 +323,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     M = len(bd.pj_joint)
     e0, e1, delta, lam, pert = (np.zeros((I, M)) for _ in range(5))
     if M:
-        B._chain_bounds(fac["L0"], fac["L1"], fac["Li0"], fac["Li1"], fac["fw"], fac["iv"], fac["dt"], fac["eps"],
+        B.chain_bounds(fac["L0"], fac["L1"], fac["Li0"], fac["Li1"], fac["fw"], fac["iv"], fac["dt"], fac["eps"],
                         off, pj, pd, bd.pj_center, bd.pj_radius, pair_part, bd.part_centers, e0, e1, delta, lam, pert)
     # scale bounds of N_J over each interval (products along the root path, parents first)
     Jn = len(rig.bind)
@@ -458,7 +457,7 @@ def _refine(rig, clip, times, fac, delta, pert, own, pair_part, todo, out, tol_a
         n = len(nodes)
         res = [np.empty(n), np.empty(n, np.int64), np.empty(n), np.empty(n, np.int64), np.empty(n),
                np.empty(n, np.int64)]
-        B._chord_tasks(rig.points, rig.joint_indices, rig.joint_weights, mats.array(), rig.vert_offsets, rig.verts,
+        B.chord_tasks(rig.points, rig.joint_indices, rig.joint_weights, mats.array(), rig.vert_offsets, rig.verts,
                        bd.part_centers, np.array(tp, np.int64), np.array(ta, np.int64), np.array(tb, np.int64),
                        np.array(tr, np.int64), np.array(ts), drow, prow, *res)
         u, vu, d0, v0, d1, v1 = res

@@ -29,8 +29,9 @@ from .errors import ColliderError
 
 #: Above this many rays the parallel ray kernel is used.
 PARALLEL_RAYS = 256
-#: Above this many vertices skinning runs on every core.
-PARALLEL_SKIN = 8_000
+#: Above this many vertices skinning runs on every core (a one-thread pass over fewer costs less
+#: than waking the pool, and the threaded kernel compiles only for colliders this large).
+PARALLEL_SKIN = 500_000
 #: :meth:`Collider.pose_from_joints` grows a sphere that does not provably hold to the bound's
 #: radius when that is at most this many times the stored radius, else to the farthest skinned
 #: vertex of the part (exact, O(part vertices)).
@@ -307,6 +308,9 @@ class Pose:
         self._ready = np.zeros(P, dtype=np.int64)  # part p's chunk spheres are valid if == _version
         self._version = 0
         self._local = np.empty((J, 4, 4))
+        self._local1 = self._local.reshape(1, J, 4, 4)  # the interpolation kernel's (T, J, 4, 4) view
+        self._time1 = np.zeros(1)
+        self._trs = {}  # per clip: the interpolation kernel's (1, A, 10) scratch
         self._sph = np.empty((1, P, 4))
         self._kb = np.empty((1, P))
         self._db = np.empty((1, P))
@@ -327,7 +331,11 @@ class Pose:
         if not np.isfinite(time):
             raise ValueError(f"time must be finite, got {time}")
         self._set_world(time)
-        PK._locals_at(time, c.tt, c.vt, c.tr, c.vr, c.ts, c.vs, c.anim_to_skel, d.rest_local, self._local)
+        self._time1[0] = time
+        trs = self._trs.get(c.name)
+        if trs is None:
+            trs = self._trs[c.name] = np.empty((1, len(c.anim_to_skel), 10))
+        PK._locals_at(self._time1, c.tt, c.vt, c.tr, c.vr, c.ts, c.vs, c.anim_to_skel, d.rest_local, self._local1, trs)
         self._posed()
         self.refit[:] = False
         self.clip = c.name if clip is not None else None

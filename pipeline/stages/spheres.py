@@ -7,23 +7,22 @@ triangles) in the bind pose and on every frame of every clip, expressed in joint
 
 with ``S = skel_transforms(clip.local, parents)`` (``S = bind_transforms`` for the bind pose).
 The points of one part over all poses are skinned by the project's one skinning kernel
-(:mod:`runtime.kernels.skin`) into a ``(F, nv, 3)`` float32 array (one part at a time), and the
+(:mod:`runtime.kernels.skin`) into a ``(F, nv, 3)`` float64 array (one part at a time), and the
 sphere is their exact minimal enclosing sphere (:func:`pipeline.geometry.min_sphere`).
 
 After the centre is rounded to float32, the radius is re-derived from the float64 distance of the
-float64 skinned points (:func:`runtime.kernels.skin.part_farthest`, not the float32 copies) to
-that centre, so containment holds exactly at every sampled pose.
+float64 skinned points to that centre, so containment holds exactly at every sampled pose.
 
 **Between frames.**  The asset's guarantee covers every time in ``[first, last]`` of every clip as
 UsdSkel interpolates it, which ``colossus validate`` certifies with
 :func:`runtime.certify.continuous`.  The same certificate runs here on the clips exactly as the
-writer will store them (translations and rotations float32, scales float16) in ``growth`` mode:
-wherever it cannot hold an interval to the minimal radius it subdivides, down to 2^6 sub-steps,
-and the part's radius becomes the largest bound it reached (``growth`` in the report; 0 for most
-parts).  The validator's adaptive subdivision stops at or before every node this one stopped at
-(its radius is at least the bound there), so the written spheres pass it.  Finally the radius is
-padded by ``SPHERE_PAD_RELATIVE * model size + SPHERE_PAD_RADIUS * radius`` and rounded up to
-float32.
+writer will store them (translations and rotations float32, scales float16) in ``growth`` mode,
+holding each interval to the padded minimal radius (``r (1 + SPHERE_PAD_RADIUS) + SPHERE_PAD_RELATIVE
+* model size``): wherever it cannot, it subdivides, down to 2^6 sub-steps, and the part's radius
+becomes the largest bound it reached (``growth`` in the report, beyond the padded radius; 0 for
+most parts).  The validator's adaptive subdivision stops at or before every node this one stopped
+at (its radius is at least the bound there), so the written spheres pass it.  Finally the radius
+is rounded up to float32.
 
 ``slack_ratio`` compares the sphere with the tightest possible per-pose sphere: the radius over the
 largest per-pose minimal sphere radius of the part's points, computed exactly on the bind pose and
@@ -36,7 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.geometry.minsphere import min_sphere, min_spheres
+from pipeline.geometry.minsphere import largest_min_sphere, min_sphere
 from pipeline.model import SkinnedMesh, Parts, skel_transforms
 from pipeline.stages import StageReport
 from pipeline.tolerances import SPHERE_PAD_RADIUS, SPHERE_PAD_RELATIVE, model_scale
@@ -138,24 +137,23 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
         verts = np.unique(mesh.triangles[parts_in.part_faces(p)].ravel())
         pos, ji, jw = pos_all[verts], ji_all[verts], jw_all[verts]
         mats = SK.fold(inv_S[:, j, None] @ to_skel)
-        pts = SK.skin_frames(pos, ji, jw, mats)
+        pts = SK.skin_frames(pos, ji, jw, mats, dtype=np.float64)  # (F, nv, 3) joint space
         center, r = min_sphere(pts.reshape(-1, 3))
-        _, frame_r = min_spheres(pts if len(slack_idx) == len(S) else pts[slack_idx])
-        del pts
+        tight = largest_min_sphere(pts if len(slack_idx) == len(S) else pts[slack_idx])
         c32 = center.astype(np.float32)
-        c64 = c32.astype(np.float64)
-        d, _ = SK.part_farthest(pos, ji, jw, mats, [0, len(verts)], np.arange(len(verts)),
-                                np.broadcast_to(c64, (len(S), 1, 3)))
-        pose_far[:, p] = d[:, 0]
+        pts -= c32.astype(np.float64)
+        d = np.sqrt(np.einsum("fvi,fvi->fv", pts, pts).max(1))
+        del pts
+        pose_far[:, p] = d
         centers[p], r_min[p] = c32, max(r, float(d.max()))
-        tight = float(frame_r.max())
         details.append({"part": p, "joint": mesh.joint_names[j], "tight_radius": tight, "vertices": int(len(verts))})
 
-    growth = _growth(mesh, parts_in, centers, r_min, pose_far)
+    target = r_min * (1.0 + SPHERE_PAD_RADIUS) + abs_pad  # the padded minimal sphere of the samples
+    need = _between_frames(mesh, parts_in, centers, target, pose_far)
+    growth = np.maximum(need - target, 0.0)
     radii = np.zeros(P, np.float32)
     for p in range(P):
-        need = r_min[p] + growth[p]
-        radii[p] = _round_up_f32(need + abs_pad + SPHERE_PAD_RADIUS * need)
+        radii[p] = _round_up_f32(max(target[p], need[p]))
         tight = details[p]["tight_radius"]
         details[p].update({"radius": float(radii[p]), "center": [float(x) for x in centers[p]],
                            "slack_ratio": float(radii[p]) / tight if tight > 0 else None,
@@ -183,17 +181,18 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     return mesh.replace(parts=new_parts), report
 
 
-def _growth(mesh, parts_in, centers, r_min, pose_far) -> np.ndarray:
-    """(P,) how much each part's radius must grow beyond ``r_min`` for the continuous certificate
-    (:func:`runtime.certify.continuous` in growth mode, on the clips as written)."""
+def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
+    """(P,) the radius each part needs between frames: at most ``target`` where the continuous
+    certificate (:func:`runtime.certify.continuous` in growth mode, on the clips as written)
+    holds every interval to it, else the largest bound it reached at :data:`GROWTH_DEPTH`."""
     P = len(parts_in)
-    growth = np.zeros(P)
+    need = np.zeros(P)
     if not mesh.clips or P == 0:
-        return growth
+        return need
     voff, verts = part_vertex_csr(mesh.triangles, parts_in.face_offsets, parts_in.faces, mesh.vertex_count)
     rig = certify.Rig(mesh.positions, mesh.joint_indices, mesh.joint_weights, mesh.geom_bind, mesh.bind_transforms,
                       mesh.rest_transforms, mesh.parents, np.asarray(parts_in.joints), centers.astype(np.float64),
-                      r_min, voff, verts)
+                      target, voff, verts)
     start = 1  # pose 0 is the bind pose
     for clip in mesh.clips:
         n = clip.frame_count
@@ -202,7 +201,6 @@ def _growth(mesh, parts_in, centers, r_min, pose_far) -> np.ndarray:
         if n < 2:
             continue
         c = certify.continuous(rig, written_clip(clip, mesh.joint_count), clip.times, far, np.ones_like(far, bool),
-                               0.0, 0.0, rho=r_min, growth=True, max_depth=GROWTH_DEPTH, frame_bound_space="joint")
-        need = np.max(np.where(np.isfinite(c.bound), c.bound, 0.0), axis=0)
-        growth = np.maximum(growth, need - r_min)
-    return np.maximum(growth, 0.0)
+                               0.0, 0.0, rho=target, growth=True, max_depth=GROWTH_DEPTH, frame_bound_space="joint")
+        need = np.maximum(need, np.max(np.where(np.isfinite(c.bound), c.bound, 0.0), axis=0))
+    return need

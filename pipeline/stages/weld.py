@@ -13,34 +13,10 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
-from numba import njit
 
 from pipeline.model import SkinnedMesh, Parts
 from pipeline.stages import StageReport
 from pipeline.tolerances import WELD_RELATIVE, WELD_WEIGHT, model_scale
-
-
-@njit(cache=True)
-def _canonical(j, w, cj, cw):
-    """Per row: influences with weight > 0 sorted by (joint, weight), then (-1, 0) padding."""
-    n, k = j.shape
-    for v in range(n):
-        c = 0
-        for t in range(k):
-            wt = w[v, t]
-            if wt > 0:  # insertion sort of the live influences
-                jt = np.int64(j[v, t])
-                s = c
-                while s > 0 and (cj[v, s - 1] > jt or (cj[v, s - 1] == jt and cw[v, s - 1] > wt)):
-                    cj[v, s] = cj[v, s - 1]
-                    cw[v, s] = cw[v, s - 1]
-                    s -= 1
-                cj[v, s] = jt
-                cw[v, s] = wt
-                c += 1
-        for t in range(c, k):
-            cj[v, t] = -1
-            cw[v, t] = 0
 
 
 def canonical_influences(joint_indices: np.ndarray, joint_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -58,49 +34,41 @@ def canonical_influences(joint_indices: np.ndarray, joint_weights: np.ndarray) -
     weights : (n, k) float32
         Matching weights, ``0`` padding.
     """
-    j = np.ascontiguousarray(joint_indices, dtype=np.int64)
-    w = np.ascontiguousarray(joint_weights, dtype=np.float32)
-    cj = np.empty(j.shape, np.int64)
-    cw = np.empty(w.shape, np.float32)
-    _canonical(j, w, cj, cw)
-    return cj, cw
+    j = np.asarray(joint_indices, dtype=np.int64)
+    w = np.asarray(joint_weights, dtype=np.float32)
+    live = w > 0
+    # per row: live influences first, by joint then weight (the last key of lexsort is the first)
+    order = np.lexsort((w, np.where(live, j, np.iinfo(np.int64).max)), axis=-1)
+    keep = np.take_along_axis(live, order, -1)
+    cj = np.where(keep, np.take_along_axis(j, order, -1), -1)
+    cw = np.where(keep, np.take_along_axis(w, order, -1), np.float32(0))
+    return np.ascontiguousarray(cj), np.ascontiguousarray(cw, dtype=np.float32)
 
 
-@njit(cache=True)
 def _exact_groups(rows):
-    """Label each row of ``rows`` (n, c) uint32 with the index of the first identical row
-    (open-addressing hash table; expected O(n))."""
+    """Label each row of ``rows`` (n, c) uint32 with the index of the first identical row.
+
+    Rows are hashed to 64 bits (vectorised FNV-1a over the 32-bit words, then a splitmix
+    finaliser) and grouped by sorting the hashes; every row is then compared with its group's
+    first row, and should two different rows ever share a hash the rows themselves are sorted
+    instead (O(n log n) either way)."""
     n, c = rows.shape
-    size = 1
-    while size < 2 * n:
-        size *= 2
-    mask = np.uint64(size - 1)
-    table = np.full(size, -1, np.int64)
-    label = np.empty(n, np.int64)
-    for i in range(n):
-        h = np.uint64(1469598103934665603)
-        for t in range(c):  # FNV-1a over 32-bit words, then a splitmix finaliser
-            h = (h ^ np.uint64(rows[i, t])) * np.uint64(1099511628211)
+    if n == 0:
+        return np.zeros(0, np.int64)
+    with np.errstate(over="ignore"):
+        h = np.full(n, 1469598103934665603, np.uint64)
+        for t in range(c):
+            h = (h ^ rows[:, t].astype(np.uint64)) * np.uint64(1099511628211)
         h ^= h >> np.uint64(31)
         h *= np.uint64(0xBF58476D1CE4E5B9)
         h ^= h >> np.uint64(29)
-        slot = h & mask
-        while True:
-            r = table[slot]
-            if r < 0:
-                table[slot] = i
-                label[i] = i
-                break
-            same = True
-            for t in range(c):
-                if rows[r, t] != rows[i, t]:
-                    same = False
-                    break
-            if same:
-                label[i] = r
-                break
-            slot = (slot + np.uint64(1)) & mask
-    return label
+    _, first, inv = np.unique(h, return_index=True, return_inverse=True)
+    label = first[inv]
+    if not np.array_equal(rows[label], rows):  # a hash collision: group the rows exactly
+        v = np.ascontiguousarray(rows).view(np.dtype((np.void, rows.dtype.itemsize * c))).ravel()
+        _, first, inv = np.unique(v, return_index=True, return_inverse=True)
+        label = first[inv]
+    return label.astype(np.int64)
 
 
 def _row_groups(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

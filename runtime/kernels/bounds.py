@@ -50,13 +50,14 @@ import numpy as np
 from numba import njit, prange
 
 from .config import FASTMATH_PROOF as _FM
+from .skin import PARALLEL_WORK
 from .skin import _lbs as _lbs_j
 
 #: Relative padding of every bound (float64 rounding of the few dozen operations behind it).
 ROUND = 1e-12
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, fastmath=_FM)
 def _norm2(m):
     """Upper bound of the spectral norm of the 3x3 linear part of a 4x4 ``m`` (see the module
     docstring), padded by :data:`ROUND`."""
@@ -71,7 +72,7 @@ def _norm2(m):
     return math.sqrt(best) * (1.0 + ROUND)
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, fastmath=_FM)
 def _colmax(m):
     """Largest column norm of the 3x3 part of ``m`` (the contract's radius scale)."""
     s = 0.0
@@ -321,8 +322,8 @@ def pose_bounds(world, bd: BoundData, parallel=None):
     sph = np.empty((F, P, 4))
     kb = np.empty((F, P))
     db = np.empty((F, P))
-    if parallel is None:
-        parallel = F * P > 256
+    if parallel is None:  # a (pose, part) pair costs about as much as skinning 4 vertices
+        parallel = F * len(bd.pj_joint) * 16 > PARALLEL_WORK
     (_pose_bounds if parallel else _pose_bounds_serial)(w, *bd.args(), sph, kb, db)
     return sph, kb, db
 
@@ -344,9 +345,58 @@ def _cull_spheres(sph, kb, db, spheres, cull):
 
 
 # ------------------------------------------------------------------ continuous time (chords)
-@njit(cache=True, parallel=True, fastmath=_FM)
-def _chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius,
-                  pair_part, part_centers, e0, e1, delta, lam, pert):
+@njit(cache=True, fastmath=_FM)
+def _chain_task(i, k, L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert):
+    """Pair ``k`` over interval ``i`` of :func:`_chain_bounds_serial`."""
+    a0x, a0y, a0z = pj_center[k, 0], pj_center[k, 1], pj_center[k, 2]
+    a1x, a1y, a1z = a0x, a0y, a0z
+    r = pj_radius[k]
+    m = math.sqrt(a0x * a0x + a0y * a0y + a0z * a0z) + r
+    v = 0.0
+    a = 0.0
+    lm = 1.0
+    pe = 0.0
+    for s in range(path_off[k], path_off[k + 1]):
+        j = path_j[s]
+        if path_dir[s] > 0:
+            n0, n1, n2 = fw[i, j, 0], fw[i, j, 1], fw[i, j, 2]
+            vn = dt[i, j] + n1 * m + n0 * v
+            an = n2 * m + 2.0 * n1 * v + n0 * a
+            pe = n0 * pe + eps[i, j, 0] * m
+            A, Bm = L0, L1
+        else:
+            n0, n1, n2 = iv[i, j, 0], iv[i, j, 1], iv[i, j, 2]
+            zx, zy, zz = a0x - L0[i, j, 0, 3], a0y - L0[i, j, 1, 3], a0z - L0[i, j, 2, 3]
+            wx, wy, wz = a1x - L1[i, j, 0, 3], a1y - L1[i, j, 1, 3], a1z - L1[i, j, 2, 3]
+            mz = max(math.sqrt(zx * zx + zy * zy + zz * zz), math.sqrt(wx * wx + wy * wy + wz * wz)) + a / 8.0 + r * lm
+            vn = n1 * mz + n0 * (v + dt[i, j])
+            an = n2 * mz + 2.0 * n1 * (v + dt[i, j]) + n0 * a
+            pe = n0 * pe + eps[i, j, 1] * mz
+            A, Bm = Li0, Li1
+        x = A[i, j, 0, 0] * a0x + A[i, j, 0, 1] * a0y + A[i, j, 0, 2] * a0z + A[i, j, 0, 3]
+        y = A[i, j, 1, 0] * a0x + A[i, j, 1, 1] * a0y + A[i, j, 1, 2] * a0z + A[i, j, 1, 3]
+        z = A[i, j, 2, 0] * a0x + A[i, j, 2, 1] * a0y + A[i, j, 2, 2] * a0z + A[i, j, 2, 3]
+        a0x, a0y, a0z = x, y, z
+        x = Bm[i, j, 0, 0] * a1x + Bm[i, j, 0, 1] * a1y + Bm[i, j, 0, 2] * a1z + Bm[i, j, 0, 3]
+        y = Bm[i, j, 1, 0] * a1x + Bm[i, j, 1, 1] * a1y + Bm[i, j, 1, 2] * a1z + Bm[i, j, 1, 3]
+        z = Bm[i, j, 2, 0] * a1x + Bm[i, j, 2, 1] * a1y + Bm[i, j, 2, 2] * a1z + Bm[i, j, 2, 3]
+        a1x, a1y, a1z = x, y, z
+        v = vn
+        a = an
+        lm = lm * n0
+        m = max(math.sqrt(a0x * a0x + a0y * a0y + a0z * a0z),
+                math.sqrt(a1x * a1x + a1y * a1y + a1z * a1z)) + a / 8.0 + r * lm
+    p = pair_part[k]
+    cx, cy, cz = part_centers[p, 0], part_centers[p, 1], part_centers[p, 2]
+    e0[i, k] = math.sqrt((a0x - cx) ** 2 + (a0y - cy) ** 2 + (a0z - cz) ** 2)
+    e1[i, k] = math.sqrt((a1x - cx) ** 2 + (a1y - cy) ** 2 + (a1z - cz) ** 2)
+    delta[i, k] = a / 8.0 * (1.0 + 1e-9)
+    lam[i, k] = lm
+    pert[i, k] = pe * (1.0 + 1e-9)
+
+
+@njit(cache=True, fastmath=_FM)
+def _chain_bounds_serial(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert):
     """Deviation-from-chord bounds of every (part, joint) ball over every interval.
 
     For interval ``i`` (normalised time ``tau`` in [0, 1]) and pair ``k`` (part P of joint J,
@@ -378,60 +428,66 @@ def _chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir,
     bounds the distance of every point of the moving ball from its chord for every tau (the
     vector form of the linear-interpolation error, ``|p(tau) - chord| <= tau (1 - tau) / 2 sup
     |p''|``), ``lam`` bounds the norm of A's linear part."""
-    I, M = L0.shape[0], pj_center.shape[0]
-    for task in prange(I * M):
-        i = task // M
-        k = task - i * M
-        a0x, a0y, a0z = pj_center[k, 0], pj_center[k, 1], pj_center[k, 2]
-        a1x, a1y, a1z = a0x, a0y, a0z
-        r = pj_radius[k]
-        m = math.sqrt(a0x * a0x + a0y * a0y + a0z * a0z) + r
-        v = 0.0
-        a = 0.0
-        lm = 1.0
-        pe = 0.0
-        for s in range(path_off[k], path_off[k + 1]):
-            j = path_j[s]
-            if path_dir[s] > 0:
-                n0, n1, n2 = fw[i, j, 0], fw[i, j, 1], fw[i, j, 2]
-                vn = dt[i, j] + n1 * m + n0 * v
-                an = n2 * m + 2.0 * n1 * v + n0 * a
-                pe = n0 * pe + eps[i, j, 0] * m
-                A, Bm = L0, L1
-            else:
-                n0, n1, n2 = iv[i, j, 0], iv[i, j, 1], iv[i, j, 2]
-                zx, zy, zz = a0x - L0[i, j, 0, 3], a0y - L0[i, j, 1, 3], a0z - L0[i, j, 2, 3]
-                wx, wy, wz = a1x - L1[i, j, 0, 3], a1y - L1[i, j, 1, 3], a1z - L1[i, j, 2, 3]
-                mz = max(math.sqrt(zx * zx + zy * zy + zz * zz), math.sqrt(wx * wx + wy * wy + wz * wz)) + a / 8.0 + r * lm
-                vn = n1 * mz + n0 * (v + dt[i, j])
-                an = n2 * mz + 2.0 * n1 * (v + dt[i, j]) + n0 * a
-                pe = n0 * pe + eps[i, j, 1] * mz
-                A, Bm = Li0, Li1
-            x = A[i, j, 0, 0] * a0x + A[i, j, 0, 1] * a0y + A[i, j, 0, 2] * a0z + A[i, j, 0, 3]
-            y = A[i, j, 1, 0] * a0x + A[i, j, 1, 1] * a0y + A[i, j, 1, 2] * a0z + A[i, j, 1, 3]
-            z = A[i, j, 2, 0] * a0x + A[i, j, 2, 1] * a0y + A[i, j, 2, 2] * a0z + A[i, j, 2, 3]
-            a0x, a0y, a0z = x, y, z
-            x = Bm[i, j, 0, 0] * a1x + Bm[i, j, 0, 1] * a1y + Bm[i, j, 0, 2] * a1z + Bm[i, j, 0, 3]
-            y = Bm[i, j, 1, 0] * a1x + Bm[i, j, 1, 1] * a1y + Bm[i, j, 1, 2] * a1z + Bm[i, j, 1, 3]
-            z = Bm[i, j, 2, 0] * a1x + Bm[i, j, 2, 1] * a1y + Bm[i, j, 2, 2] * a1z + Bm[i, j, 2, 3]
-            a1x, a1y, a1z = x, y, z
-            v = vn
-            a = an
-            lm = lm * n0
-            m = max(math.sqrt(a0x * a0x + a0y * a0y + a0z * a0z),
-                    math.sqrt(a1x * a1x + a1y * a1y + a1z * a1z)) + a / 8.0 + r * lm
-        p = pair_part[k]
-        cx, cy, cz = part_centers[p, 0], part_centers[p, 1], part_centers[p, 2]
-        e0[i, k] = math.sqrt((a0x - cx) ** 2 + (a0y - cy) ** 2 + (a0z - cz) ** 2)
-        e1[i, k] = math.sqrt((a1x - cx) ** 2 + (a1y - cy) ** 2 + (a1z - cz) ** 2)
-        delta[i, k] = a / 8.0 * (1.0 + 1e-9)
-        lam[i, k] = lm
-        pert[i, k] = pe * (1.0 + 1e-9)
+    M = pj_center.shape[0]
+    for task in range(L0.shape[0] * M):
+        _chain_task(task // M, task % M, L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert)
 
 
 @njit(cache=True, parallel=True, fastmath=_FM)
-def _chord_tasks(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta,
-                 task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
+def _chain_bounds_parallel(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert):
+    """:func:`_chain_bounds_serial` over threads (large inputs; see :func:`chain_bounds`)."""
+    M = pj_center.shape[0]
+    for task in prange(L0.shape[0] * M):
+        _chain_task(task // M, task % M, L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert)
+
+
+def chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert):
+    """Run :func:`_chain_bounds_serial` (or its threaded twin on large inputs: more than
+    :data:`PARALLEL_WORK` path factors in all)."""
+    work = L0.shape[0] * int(path_off[-1]) if len(path_off) else 0
+    kern = _chain_bounds_parallel if work > PARALLEL_WORK else _chain_bounds_serial
+    kern(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert)
+
+
+@njit(cache=True, fastmath=_FM)
+def _chord_task(t, points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
+    """Task ``t`` of :func:`_chord_tasks_serial`."""
+    p = task_part[t]
+    ia, ib, row, sc = task_a[t], task_b[t], task_delta[t], task_scale[t]
+    cx, cy, cz = centers[p, 0], centers[p, 1], centers[p, 2]
+    bu, bd0, bd1 = -1.0, -1.0, -1.0
+    vu, v0, v1 = -1, -1, -1
+    for s in range(poff[p], poff[p + 1]):
+        v = pverts[s]
+        x, y, z = _lbs_j(v, ia, points, ji, jw, mats)
+        d0 = math.sqrt((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2)
+        x, y, z = _lbs_j(v, ib, points, ji, jw, mats)
+        d1 = math.sqrt((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2)
+        dev = 0.0
+        for i in range(ji.shape[1]):
+            w = abs(np.float64(jw[v, i]))
+            if w != 0.0:
+                dev += w * (sc * delta[row, ji[v, i]] + pert[row, ji[v, i]])
+        u = max(d0, d1) + dev
+        if not (u <= bu):
+            bu = u if u == u else np.inf
+            vu = v
+        if not (d0 <= bd0):
+            bd0 = d0 if d0 == d0 else np.inf
+            v0 = v
+        if not (d1 <= bd1):
+            bd1 = d1 if d1 == d1 else np.inf
+            v1 = v
+    out_u[t] = bu * (1.0 + ROUND)
+    out_vu[t] = vu
+    out_d0[t] = bd0
+    out_v0[t] = v0
+    out_d1[t] = bd1
+    out_v1[t] = v1
+
+
+@njit(cache=True, fastmath=_FM)
+def _chord_tasks_serial(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
     """Per-vertex chord bound of (part, time interval) tasks.
 
     Task ``t``: part ``p = task_part[t]``; the J-space skinning transforms of the interval's two
@@ -445,36 +501,20 @@ def _chord_tasks(points, ji, jw, mats, poff, pverts, centers, task_part, task_a,
     vertex strays from its chord by at most the weighted strays of its copies; the chord stays
     within the larger end distance).  Out: the largest U and its vertex, the largest end
     distances and their vertices."""
+    for t in range(task_part.shape[0]):
+        _chord_task(t, points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1)
+
+
+@njit(cache=True, parallel=True, fastmath=_FM)
+def _chord_tasks_parallel(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
+    """:func:`_chord_tasks_serial` over threads (large inputs; see :func:`chord_tasks`)."""
     for t in prange(task_part.shape[0]):
-        p = task_part[t]
-        ia, ib, row, sc = task_a[t], task_b[t], task_delta[t], task_scale[t]
-        cx, cy, cz = centers[p, 0], centers[p, 1], centers[p, 2]
-        bu, bd0, bd1 = -1.0, -1.0, -1.0
-        vu, v0, v1 = -1, -1, -1
-        for s in range(poff[p], poff[p + 1]):
-            v = pverts[s]
-            x, y, z = _lbs_j(v, ia, points, ji, jw, mats)
-            d0 = math.sqrt((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2)
-            x, y, z = _lbs_j(v, ib, points, ji, jw, mats)
-            d1 = math.sqrt((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2)
-            dev = 0.0
-            for i in range(ji.shape[1]):
-                w = abs(np.float64(jw[v, i]))
-                if w != 0.0:
-                    dev += w * (sc * delta[row, ji[v, i]] + pert[row, ji[v, i]])
-            u = max(d0, d1) + dev
-            if not (u <= bu):
-                bu = u if u == u else np.inf
-                vu = v
-            if not (d0 <= bd0):
-                bd0 = d0 if d0 == d0 else np.inf
-                v0 = v
-            if not (d1 <= bd1):
-                bd1 = d1 if d1 == d1 else np.inf
-                v1 = v
-        out_u[t] = bu * (1.0 + ROUND)
-        out_vu[t] = vu
-        out_d0[t] = bd0
-        out_v0[t] = v0
-        out_d1[t] = bd1
-        out_v1[t] = v1
+        _chord_task(t, points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1)
+
+
+def chord_tasks(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
+    """Run :func:`_chord_tasks_serial` (or its threaded twin above :data:`PARALLEL_WORK`
+    vertex-influence evaluations)."""
+    work = int(np.diff(poff)[task_part].sum()) * ji.shape[1] * 2 if len(task_part) else 0
+    kern = _chord_tasks_parallel if work > PARALLEL_WORK else _chord_tasks_serial
+    kern(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1)

@@ -17,8 +17,13 @@ Kernels (private) and their readable numpy reference ``tests/naive.py::naive_lbs
 * ``_lbs(v, f, points, ji, jw, m)``: one vertex (inlined into the loops below);
 * ``_skin_frames`` / ``_skin_frames_serial``: every vertex of every pose into ``(F, n, 3)``;
 * ``_skin_subset``: the vertices ``verts`` of one pose (the runtime's lazy per-part skinning);
-* ``_farthest``: per (pose, part), the part's skinned vertex farthest from a centre, only for
-  the (pose, part) pairs asked for (the frame proof's exact tier).
+* ``_farthest_serial`` / ``_farthest_parallel``: per (pose, part), the part's skinned vertex
+  farthest from a centre, only for the (pose, part) pairs asked for (the frame proof's exact
+  tier).
+
+Each loop body is one ``inline`` function behind a one-thread driver and a ``prange`` driver; the
+wrappers pick the threaded one only above :data:`PARALLEL_WORK` (numba compiles a kernel on its
+first call, so the threaded drivers compile only for large inputs).
 
 Fast math: :data:`runtime.kernels.config.FASTMATH_PROOF` everywhere (no nnan/ninf): the same
 kernel serves the proof and the game, so it keeps NaN semantics.
@@ -31,11 +36,17 @@ from numba import njit, prange
 
 from .config import FASTMATH_PROOF as _FM
 
-#: Poses per task of :func:`_farthest`: a vertex is loaded once per block of poses.
+#: Poses per task of :func:`_farthest_serial`: a vertex is loaded once per block of poses.
 FRAME_BLOCK = 8
+#: The wrappers use the multi-threaded kernels only above this many vertex-influence evaluations
+#: (about 10 ms of one thread): below it one thread is faster than waking a pool (on a busy
+#: machine a parallel launch can cost milliseconds), and the parallel kernels, which take
+#: seconds to compile, are never compiled for the small inputs of a first import, validation or
+#: game frame.
+PARALLEL_WORK = 4_000_000
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, fastmath=_FM)
 def _lbs(v, f, points, ji, jw, m):
     """Skinned position of vertex ``v`` under pose ``f`` of the folded transforms ``m``
     (F, J, 12); returns three float64.  Zero weights are padding (skipped)."""
@@ -72,7 +83,7 @@ def _skin_frames(points, ji, jw, m, out):
 
 @njit(cache=True, fastmath=_FM)
 def _skin_frames_serial(points, ji, jw, m, out):
-    """:func:`_skin_frames` on one thread (small inputs: no thread-pool wake-up)."""
+    """:func:`_skin_frames` on one thread (below :data:`PARALLEL_WORK`)."""
     for f in range(m.shape[0]):
         for v in range(points.shape[0]):
             x, y, z = _lbs(v, f, points, ji, jw, m)
@@ -92,48 +103,62 @@ def _skin_subset(verts, lo, hi, points, ji, jw, m, out):
         out[v, 2] = z
 
 
-@njit(cache=True, parallel=True, fastmath=_FM)
-def _farthest(points, ji, jw, m, poff, pverts, centers, todo, out_d, out_v):
+@njit(cache=True, fastmath=_FM)
+def _farthest_task(task, nb, points, ji, jw, m, poff, pverts, centers, todo, out_d, out_v):
+    """Task ``task`` of :func:`_farthest_serial`: part ``task // nb``, the ``task % nb``-th block
+    of :data:`FRAME_BLOCK` poses."""
+    F = m.shape[0]
+    p = task // nb
+    f0 = (task % nb) * FRAME_BLOCK
+    f1 = min(F, f0 + FRAME_BLOCK)
+    any_todo = False
+    for f in range(f0, f1):
+        if todo[f, p]:
+            any_todo = True
+        out_d[f, p] = -1.0 if todo[f, p] else out_d[f, p]  # the block's running maximum (squared)
+    if not any_todo:
+        return
+    for s in range(poff[p], poff[p + 1]):
+        v = pverts[s]
+        for f in range(f0, f1):
+            if not todo[f, p]:
+                continue
+            x, y, z = _lbs(v, f, points, ji, jw, m)
+            dx = x - centers[f, p, 0]
+            dy = y - centers[f, p, 1]
+            dz = z - centers[f, p, 2]
+            d2 = dx * dx + dy * dy + dz * dz
+            if not (d2 <= 1e300):  # NaN or inf: as far as it gets
+                d2 = np.inf
+            if d2 > out_d[f, p]:
+                out_d[f, p] = d2
+                out_v[f, p] = v
+    for f in range(f0, f1):
+        if todo[f, p]:
+            out_d[f, p] = np.sqrt(out_d[f, p]) if out_d[f, p] >= 0.0 else 0.0
+
+
+@njit(cache=True, fastmath=_FM)
+def _farthest_serial(points, ji, jw, m, poff, pverts, centers, todo, out_d, out_v):
     """For every (pose f, part p) with ``todo[f, p]``: the largest distance from ``centers[f, p]``
     (F, P, 3) to a skinned vertex of part p (CSR ``poff`` / ``pverts``) into ``out_d[f, p]``
     (inf when a skinned point is NaN or inf; 0 for an empty part) and its vertex into
-    ``out_v[f, p]`` (-1 for an empty part).  Pairs not to do are left untouched.
+    ``out_v[f, p]`` (left at -1 for an empty part).  Pairs not to do are left untouched.
 
     Tasks are (part, block of :data:`FRAME_BLOCK` poses): a vertex is read once and skinned for
     every pose of the block that is to do."""
-    F, P = m.shape[0], poff.shape[0] - 1
-    nb = (F + FRAME_BLOCK - 1) // FRAME_BLOCK
-    for task in prange(P * nb):
-        p = task // nb
-        f0 = (task % nb) * FRAME_BLOCK
-        f1 = min(F, f0 + FRAME_BLOCK)
-        any_todo = False
-        for f in range(f0, f1):
-            if todo[f, p]:
-                any_todo = True
-        if not any_todo:
-            continue
-        best = np.full(FRAME_BLOCK, -1.0)
-        bestv = np.full(FRAME_BLOCK, -1, dtype=np.int32)
-        for s in range(poff[p], poff[p + 1]):
-            v = pverts[s]
-            for f in range(f0, f1):
-                if not todo[f, p]:
-                    continue
-                x, y, z = _lbs(v, f, points, ji, jw, m)
-                dx = x - centers[f, p, 0]
-                dy = y - centers[f, p, 1]
-                dz = z - centers[f, p, 2]
-                d2 = dx * dx + dy * dy + dz * dz
-                if not (d2 <= 1e300):  # NaN or inf: as far as it gets
-                    d2 = np.inf
-                if d2 > best[f - f0]:
-                    best[f - f0] = d2
-                    bestv[f - f0] = v
-        for f in range(f0, f1):
-            if todo[f, p]:
-                out_d[f, p] = np.sqrt(best[f - f0]) if best[f - f0] >= 0.0 else 0.0
-                out_v[f, p] = bestv[f - f0]
+    nb = (m.shape[0] + FRAME_BLOCK - 1) // FRAME_BLOCK
+    for task in range((poff.shape[0] - 1) * nb):
+        _farthest_task(task, nb, points, ji, jw, m, poff, pverts, centers, todo, out_d, out_v)
+
+
+@njit(cache=True, parallel=True, fastmath=_FM)
+def _farthest_parallel(points, ji, jw, m, poff, pverts, centers, todo, out_d, out_v):
+    """:func:`_farthest_serial` with the tasks spread over threads (large inputs only: a parallel
+    kernel takes seconds to compile and a thread-pool launch costs more than small inputs)."""
+    nb = (m.shape[0] + FRAME_BLOCK - 1) // FRAME_BLOCK
+    for task in prange((poff.shape[0] - 1) * nb):
+        _farthest_task(task, nb, points, ji, jw, m, poff, pverts, centers, todo, out_d, out_v)
 
 
 # ------------------------------------------------------------------------ public wrappers
@@ -171,7 +196,7 @@ def check_skin_inputs(points, joint_indices, joint_weights, joint_count: int):
     return pts, ji, jw
 
 
-def skin_frames(points, joint_indices, joint_weights, skin_xforms, out=None) -> np.ndarray:
+def skin_frames(points, joint_indices, joint_weights, skin_xforms, out=None, dtype=np.float32) -> np.ndarray:
     """Linear-blend skinning of ``F`` poses (compiled; parallel above 20,000 vertex-poses).
 
     Parameters
@@ -180,20 +205,26 @@ def skin_frames(points, joint_indices, joint_weights, skin_xforms, out=None) -> 
     joint_indices : (n, k) int, joint_weights : (n, k) float32
     skin_xforms : (F, J, 4, 4) or (J, 4, 4) float64 column-vector skinning transforms (or
         already folded ``(F, J, 12)``)
-    out : (F, n, 3) float32, optional
+    out : (F, n, 3) ``dtype``, optional
+    dtype : float32 (the default: the runtime's and the asset's points) or float64 (the exact
+        float64 skinned points, as the spheres stage measures them)
 
     Returns
     -------
-    (F, n, 3) float32: ``sum_k w[v,k] * skin_xforms[f, j[v,k]] @ (p[v], 1)``.
+    (F, n, 3) ``dtype``: ``sum_k w[v,k] * skin_xforms[f, j[v,k]] @ (p[v], 1)``.
     """
     m = _folded(skin_xforms)
     pts, ji, jw = check_skin_inputs(points, joint_indices, joint_weights, m.shape[1])
     shape = (m.shape[0], len(pts), 3)
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise ValueError(f"dtype: expected float32 or float64, got {dtype}")
     if out is None:
-        out = np.empty(shape, dtype=np.float32)
-    elif out.shape != shape or out.dtype != np.float32 or not out.flags.c_contiguous:
-        raise ValueError(f"out: expected C-contiguous float32 {shape}, got {out.dtype} {out.shape}")
-    (_skin_frames if shape[0] * shape[1] > 20_000 else _skin_frames_serial)(pts, ji, jw, m, out)
+        out = np.empty(shape, dtype=dtype)
+    elif out.shape != shape or out.dtype != dtype or not out.flags.c_contiguous:
+        raise ValueError(f"out: expected C-contiguous {dtype} {shape}, got {out.dtype} {out.shape}")
+    work = shape[0] * shape[1] * ji.shape[1]
+    (_skin_frames if work > PARALLEL_WORK else _skin_frames_serial)(pts, ji, jw, m, out)
     return out
 
 
@@ -233,7 +264,8 @@ def part_farthest(points, joint_indices, joint_weights, skin_xforms, part_offset
     d = np.full((F, P), np.nan)
     v = np.full((F, P), -1, dtype=np.int32)
     if F and P:
-        _farthest(pts, ji, jw, m, poff, pv, c, t, d, v)
+        work = int((np.diff(poff)[None] * t).sum()) * ji.shape[1]  # vertex-influence evaluations
+        (_farthest_parallel if work > PARALLEL_WORK else _farthest_serial)(pts, ji, jw, m, poff, pv, c, t, d, v)
     return d, v
 
 
