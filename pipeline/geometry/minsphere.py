@@ -9,8 +9,9 @@ and the usual Welzl nested loop):
    and coplanar support sets fall back to the smallest sphere enclosing them), in plain Python
    floats (IEEE float64): the core set stays small (tens of points), so this costs well under a
    millisecond;
-3. one vectorised pass over all points finds, per chunk, the farthest point; those outside
-   ``radius * (1 + 1e-9)`` join the core set and we go back to 2;
+3. one vectorised pass over all points finds, per chunk, the farthest point; the next core set
+   is the sphere's boundary points plus those of them outside ``radius * (1 + 1e-9)`` (its
+   sphere is strictly larger, so the loop ends), and we go back to 2;
 4. when no point is outside, the returned radius is the exact (float64) largest distance from the
    centre to any input point, so containment holds even when the tolerance let a point slip.
 
@@ -164,8 +165,10 @@ def _sqdist(P, c) -> np.ndarray:
     return out
 
 
-def _core_sphere(P) -> tuple[np.ndarray, float]:
-    """Minimal sphere of ``P`` (n >= 1, 3) float32/float64, finite -> (centre (3,), radius)."""
+def _core_sphere(P, hint=()) -> tuple[np.ndarray, float, list]:
+    """Minimal sphere of ``P`` (n >= 1, 3) float32/float64, finite -> (centre (3,), radius, the
+    core points on its boundary).  ``hint``: indices to add to the first core set (e.g. the
+    boundary points of a similar set's sphere: fewer iterations)."""
     n = len(P)
     ext = []  # per block: the indices of its smallest and largest projections, and their values
     for s in range(0, n, _BLOCK):
@@ -174,7 +177,7 @@ def _core_sphere(P) -> tuple[np.ndarray, float]:
         ext.append((lo + s, hi + s, proj[np.arange(7), lo], proj[np.arange(7), hi]))
     lo_i, hi_i, lo_v, hi_v = (np.array([e[k] for e in ext]) for k in range(4))
     k = np.arange(7)
-    core = list(dict.fromkeys(np.r_[lo_i[lo_v.argmin(0), k], hi_i[hi_v.argmax(0), k]].tolist()))
+    core = list(dict.fromkeys(list(hint) + np.r_[lo_i[lo_v.argmin(0), k], hi_i[hi_v.argmax(0), k]].tolist()))
     o = P[core[0]].astype(np.float64)
     nch = min(_CHUNKS, n)
     bounds = [c * n // nch for c in range(nch + 1)]
@@ -195,12 +198,20 @@ def _core_sphere(P) -> tuple[np.ndarray, float]:
         lim = r2 * (1.0 + CONTAIN_REL) * (1.0 + CONTAIN_REL)
         if maxd2 <= lim:
             break
-        known = set(core)
+        on = _boundary(P, core, o, c, r2)
+        known = set(on)
         added = [i for i in far if d2[i] > lim and i not in known]
         if not added:  # numerically stuck: the radius below still covers every point
             break
-        core += list(dict.fromkeys(added))
-    return ctr, math.sqrt(max(r2, maxd2))
+        # the next core: this sphere's boundary points and the points outside it (the sphere of
+        # that set is strictly larger, so the loop ends; and the core stays a few points)
+        core = on + list(dict.fromkeys(added))
+    return ctr, math.sqrt(max(r2, maxd2)), _boundary(P, core, o, c, r2)
+
+
+def _boundary(P, core, o, c, r2) -> list:
+    """The core points on the boundary of the sphere ``(c, r2)`` (relative to ``o``)."""
+    return [i for i in core if _d2(P[i].astype(np.float64) - o, c) >= r2 * (1.0 - 1e-7)]
 
 
 # -- public wrappers -----------------------------------------------------------------------------
@@ -233,7 +244,7 @@ def min_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
         The largest float64 distance from ``center`` to a point, so every point is contained;
         it exceeds the exact minimal radius by at most about ``1e-9`` relative.
     """
-    c, r = _core_sphere(_as_points(points, 2, "min_sphere points"))
+    c, r, _ = _core_sphere(_as_points(points, 2, "min_sphere points"))
     return c, float(r)
 
 
@@ -253,30 +264,41 @@ def min_spheres(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     centers = np.zeros((len(p), 3))
     radii = np.zeros(len(p))
     for f in range(len(p)):
-        centers[f], radii[f] = _core_sphere(p[f])
+        centers[f], radii[f], _ = _core_sphere(p[f])
     return centers, radii
 
 
-def largest_min_sphere(points: np.ndarray) -> float:
-    """The largest of the minimal enclosing radii of ``F`` point sets, ``max_f min_sphere(points[f])``,
-    exactly, solving only the sets that can be the largest.
+def largest_min_sphere(points: np.ndarray, center=None, rel: float = 0.0) -> float:
+    """The largest of the minimal enclosing radii of ``F`` point sets, ``max_f min_sphere(points[f])``
+    (exactly, or at most ``rel`` relative below it), solving only the sets that can be the
+    largest.
 
-    Each set's minimal radius is at most its farthest distance from its bounding-box centre (the
-    ball around any centre that holds the set is no smaller than the minimal one); the sets are
-    solved in decreasing order of that bound until the next bound cannot beat the largest radius
-    found.
+    Each set's minimal radius is at most its farthest distance from any centre (the ball around
+    that centre holding the set is no smaller than the minimal one): from its bounding-box centre,
+    or from ``center`` (3,) when given (e.g. the minimal sphere of all the sets together, which
+    for the poses of a near-rigid part is close to each pose's own).  The sets are solved in
+    decreasing order of that bound until the next bound cannot beat the largest radius found by
+    more than ``rel`` (with ``rel > 0`` the many poses of a rigid part, whose minimal spheres
+    differ only by rounding, are solved once).
 
     Parameters
     ----------
     points : (F, n, 3) float32 or float64, F >= 1, n >= 1, finite.
+    center : (3,), optional
+    rel : float >= 0
     """
     p = _as_points(points, 3, "largest_min_sphere points")
-    lo_box, hi_box = p.min(1).astype(np.float64), p.max(1).astype(np.float64)
-    mid = 0.5 * (lo_box + hi_box)
-    upper = np.array([math.sqrt(_sqdist(p[f], mid[f]).max()) for f in range(len(p))]) * (1 + 1e-12)
+    mid = 0.5 * (p.min(1).astype(np.float64) + p.max(1).astype(np.float64))
+    upper = np.array([_sqdist(p[f], mid[f]).max() for f in range(len(p))])
+    if center is not None:
+        c = np.asarray(center, dtype=np.float64).reshape(3)
+        upper = np.minimum(upper, [_sqdist(p[f], c).max() for f in range(len(p))])
+    upper = np.sqrt(upper) * (1 + 1e-12)
     best = -1.0
+    hint = []
     for f in np.argsort(-upper, kind="stable"):
-        if upper[f] <= best:
+        if upper[f] <= best * (1.0 + rel):
             break
-        best = max(best, _core_sphere(p[f])[1])
+        _, r, hint = _core_sphere(p[f], hint)  # the sets are alike: start from the last boundary
+        best = max(best, r)
     return best

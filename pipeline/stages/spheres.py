@@ -50,6 +50,9 @@ from runtime.schema import part_vertex_csr
 #: and it keeps the per-pose work bounded on long clips.  The containing sphere itself always
 #: covers every frame.
 SLACK_FRAMES_PER_CLIP = 32
+#: ``tight_radius`` is the largest per-pose minimal radius to within this (relative, below): the
+#: poses of a near-rigid part, whose spheres differ only by rounding, are then solved once.
+TIGHT_REL = 1e-7
 
 
 def pose_transforms(mesh: SkinnedMesh) -> tuple[np.ndarray, list]:
@@ -139,7 +142,7 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
         mats = SK.fold(inv_S[:, j, None] @ to_skel)
         pts = SK.skin_frames(pos, ji, jw, mats, dtype=np.float64)  # (F, nv, 3) joint space
         center, r = min_sphere(pts.reshape(-1, 3))
-        tight = largest_min_sphere(pts if len(slack_idx) == len(S) else pts[slack_idx])
+        tight = largest_min_sphere(pts if len(slack_idx) == len(S) else pts[slack_idx], center, rel=TIGHT_REL)
         c32 = center.astype(np.float32)
         pts -= c32.astype(np.float64)
         d = np.sqrt(np.einsum("fvi,fvi->fv", pts, pts).max(1))

@@ -84,46 +84,48 @@ def _colmax(m):
 
 
 @njit(cache=True, fastmath=_FM)
+def _xf(m, x, y, z):
+    """``m @ (x, y, z, 1)`` for a 4x4 (or 3x4) column-vector ``m``: three float64."""
+    return (m[0, 0] * x + m[0, 1] * y + m[0, 2] * z + m[0, 3], m[1, 0] * x + m[1, 1] * y + m[1, 2] * z + m[1, 3],
+            m[2, 0] * x + m[2, 1] * y + m[2, 2] * z + m[2, 3])
+
+
+@njit(cache=True, fastmath=_FM)
 def _pose_bound(f, p, world, part_joint, part_centers, part_radii, pj_offsets, pj_joint, pj_center,
-                pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db):
+                pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db, e, E):
     """Part ``p`` at pose ``f``: sphere ``sph[f, p]`` (centre, radius), bounds ``kb[f, p]`` (test
     K) and ``db[f, p]`` (test D; inf when the part has no Pareto set) on the distance of any of
-    its skinned vertices from the centre."""
+    its skinned vertices from the centre.  ``e`` (>= the part's joint count,) and ``E`` (4, 4)
+    are scratch."""
     J = part_joint[p]
-    cx, cy, cz = part_centers[p, 0], part_centers[p, 1], part_centers[p, 2]
-    wx = world[f, J, 0, 0] * cx + world[f, J, 0, 1] * cy + world[f, J, 0, 2] * cz + world[f, J, 0, 3]
-    wy = world[f, J, 1, 0] * cx + world[f, J, 1, 1] * cy + world[f, J, 1, 2] * cz + world[f, J, 1, 3]
-    wz = world[f, J, 2, 0] * cx + world[f, J, 2, 1] * cy + world[f, J, 2, 2] * cz + world[f, J, 2, 3]
+    NJ = world[f, J]
+    wx, wy, wz = _xf(NJ, part_centers[p, 0], part_centers[p, 1], part_centers[p, 2])
     sph[f, p, 0] = wx
     sph[f, p, 1] = wy
     sph[f, p, 2] = wz
-    sph[f, p, 3] = part_radii[p] * _colmax(world[f, J])
+    sph[f, p, 3] = part_radii[p] * _colmax(NJ)
     cnorm = math.sqrt(wx * wx + wy * wy + wz * wz)
-    sJ = _norm2(world[f, J])
+    sJ = _norm2(NJ)
     far = 0.0
     lo, hi = pj_offsets[p], pj_offsets[p + 1]
-    e = np.zeros(hi - lo)
-    E = np.empty((4, 4))
     for i in range(lo, hi):
         b = pj_joint[i]
         ox, oy, oz = pj_center[i, 0], pj_center[i, 1], pj_center[i, 2]
-        x = world[f, b, 0, 0] * ox + world[f, b, 0, 1] * oy + world[f, b, 0, 2] * oz + world[f, b, 0, 3] - wx
-        y = world[f, b, 1, 0] * ox + world[f, b, 1, 1] * oy + world[f, b, 1, 2] * oz + world[f, b, 1, 3] - wy
-        z = world[f, b, 2, 0] * ox + world[f, b, 2, 1] * oy + world[f, b, 2, 2] * oz + world[f, b, 2, 3] - wz
-        d = math.sqrt(x * x + y * y + z * z) + _norm2(world[f, b]) * pj_radius[i]
+        x, y, z = _xf(world[f, b], ox, oy, oz)
+        d = math.sqrt((x - wx) ** 2 + (y - wy) ** 2 + (z - wz) ** 2) + _norm2(world[f, b]) * pj_radius[i]
         if not (d <= far):  # NaN reads as far
             far = d if d == d else np.inf
+        e[i - lo] = 0.0
         if b == J:
             continue
-        # E_b = N_b - N_J X_b (X_b = B_J^-1 B_b)
-        for r in range(3):
+        for r in range(3):  # E_b = N_b - N_J X_b (X_b = B_J^-1 B_b)
             for c in range(4):
-                E[r, c] = world[f, b, r, c] - (world[f, J, r, 0] * pj_rel[i, 0, c] + world[f, J, r, 1] * pj_rel[i, 1, c]
-                                              + world[f, J, r, 2] * pj_rel[i, 2, c] + world[f, J, r, 3] * pj_rel[i, 3, c])
-        ex = E[0, 0] * ox + E[0, 1] * oy + E[0, 2] * oz + E[0, 3]
-        ey = E[1, 0] * ox + E[1, 1] * oy + E[1, 2] * oz + E[1, 3]
-        ez = E[2, 0] * ox + E[2, 1] * oy + E[2, 2] * oz + E[2, 3]
-        e[i - lo] = math.sqrt(ex * ex + ey * ey + ez * ez) + _norm2(E) * pj_radius[i]
+                acc = world[f, b, r, c]
+                for q in range(4):
+                    acc -= NJ[r, q] * pj_rel[i, q, c]
+                E[r, c] = acc
+        x, y, z = _xf(E, ox, oy, oz)
+        e[i - lo] = math.sqrt(x * x + y * y + z * z) + _norm2(E) * pj_radius[i]
     pad = (1.0 + ROUND)
     kb[f, p] = (part_wabs[p] * far + part_wdev[p] * cnorm) * pad
     h0, h1 = h_offsets[p], h_offsets[p + 1]
@@ -134,8 +136,7 @@ def _pose_bound(f, p, world, part_joint, part_centers, part_radii, pj_offsets, p
     dmax = 0.0
     for h in range(h0, h1):
         acc = sJ * h_dist[h]
-        if h_dist[h] > dmax:
-            dmax = h_dist[h]
+        dmax = max(dmax, h_dist[h])
         for i in range(hi - lo):
             acc += h_w[h, i] * e[i]
         if not (acc <= best):
@@ -147,22 +148,25 @@ def _pose_bound(f, p, world, part_joint, part_centers, part_radii, pj_offsets, p
 def _pose_bounds(world, part_joint, part_centers, part_radii, pj_offsets, pj_joint, pj_center, pj_radius,
                  pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db):
     """:func:`_pose_bound` for every (pose, part): world (F, J, 4, 4) joint -> stage; sph
-    (F, P, 4), kb, db (F, P) out."""
+    (F, P, 4), kb, db (F, P) out.  Threaded (large inputs only, see :func:`pose_bounds`)."""
     F, P = world.shape[0], part_joint.shape[0]
     for task in prange(F * P):
         f = task // P
         _pose_bound(f, task - f * P, world, part_joint, part_centers, part_radii, pj_offsets, pj_joint,
-                    pj_center, pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db)
+                    pj_center, pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db,
+                    np.empty(h_w.shape[1]), np.empty((4, 4)))
 
 
 @njit(cache=True, fastmath=_FM)
 def _pose_bounds_serial(world, part_joint, part_centers, part_radii, pj_offsets, pj_joint, pj_center,
                         pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db):
-    """:func:`_pose_bounds` on one thread (one pose: the runtime's per-frame call)."""
+    """:func:`_pose_bounds` on one thread (the runtime's per-frame call, and small proofs)."""
+    e = np.empty(h_w.shape[1])
+    E = np.empty((4, 4))
     for f in range(world.shape[0]):
         for p in range(part_joint.shape[0]):
             _pose_bound(f, p, world, part_joint, part_centers, part_radii, pj_offsets, pj_joint, pj_center,
-                        pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db)
+                        pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db, e, E)
 
 
 # ------------------------------------------------------------------------ precomputed data
@@ -360,29 +364,23 @@ def _chain_task(i, k, L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_
         j = path_j[s]
         if path_dir[s] > 0:
             n0, n1, n2 = fw[i, j, 0], fw[i, j, 1], fw[i, j, 2]
-            vn = dt[i, j] + n1 * m + n0 * v
-            an = n2 * m + 2.0 * n1 * v + n0 * a
+            mz = m
+            vz = v
             pe = n0 * pe + eps[i, j, 0] * m
-            A, Bm = L0, L1
+            a0x, a0y, a0z = _xf(L0[i, j], a0x, a0y, a0z)
+            a1x, a1y, a1z = _xf(L1[i, j], a1x, a1y, a1z)
         else:
             n0, n1, n2 = iv[i, j, 0], iv[i, j, 1], iv[i, j, 2]
             zx, zy, zz = a0x - L0[i, j, 0, 3], a0y - L0[i, j, 1, 3], a0z - L0[i, j, 2, 3]
             wx, wy, wz = a1x - L1[i, j, 0, 3], a1y - L1[i, j, 1, 3], a1z - L1[i, j, 2, 3]
             mz = max(math.sqrt(zx * zx + zy * zy + zz * zz), math.sqrt(wx * wx + wy * wy + wz * wz)) + a / 8.0 + r * lm
-            vn = n1 * mz + n0 * (v + dt[i, j])
-            an = n2 * mz + 2.0 * n1 * (v + dt[i, j]) + n0 * a
+            vz = v + dt[i, j]
             pe = n0 * pe + eps[i, j, 1] * mz
-            A, Bm = Li0, Li1
-        x = A[i, j, 0, 0] * a0x + A[i, j, 0, 1] * a0y + A[i, j, 0, 2] * a0z + A[i, j, 0, 3]
-        y = A[i, j, 1, 0] * a0x + A[i, j, 1, 1] * a0y + A[i, j, 1, 2] * a0z + A[i, j, 1, 3]
-        z = A[i, j, 2, 0] * a0x + A[i, j, 2, 1] * a0y + A[i, j, 2, 2] * a0z + A[i, j, 2, 3]
-        a0x, a0y, a0z = x, y, z
-        x = Bm[i, j, 0, 0] * a1x + Bm[i, j, 0, 1] * a1y + Bm[i, j, 0, 2] * a1z + Bm[i, j, 0, 3]
-        y = Bm[i, j, 1, 0] * a1x + Bm[i, j, 1, 1] * a1y + Bm[i, j, 1, 2] * a1z + Bm[i, j, 1, 3]
-        z = Bm[i, j, 2, 0] * a1x + Bm[i, j, 2, 1] * a1y + Bm[i, j, 2, 2] * a1z + Bm[i, j, 2, 3]
-        a1x, a1y, a1z = x, y, z
-        v = vn
-        a = an
+            a0x, a0y, a0z = _xf(Li0[i, j], a0x, a0y, a0z)
+            a1x, a1y, a1z = _xf(Li1[i, j], a1x, a1y, a1z)
+        # forward p = T + F q: |p'| <= dt + n1 m + n0 v, |p''| <= n2 m + 2 n1 v + n0 a;
+        # inverse p = F^-1 (q - T): the same with m -> m_z and v -> v + dt (and no dt term)
+        v, a = n1 * mz + n0 * vz + (dt[i, j] if path_dir[s] > 0 else 0.0), n2 * mz + 2.0 * n1 * vz + n0 * a
         lm = lm * n0
         m = max(math.sqrt(a0x * a0x + a0y * a0y + a0z * a0z),
                 math.sqrt(a1x * a1x + a1y * a1y + a1z * a1z)) + a / 8.0 + r * lm
@@ -458,7 +456,7 @@ def _chord_task(t, points, ji, jw, mats, poff, pverts, centers, task_part, task_
     bu, bd0, bd1 = -1.0, -1.0, -1.0
     vu, v0, v1 = -1, -1, -1
     for s in range(poff[p], poff[p + 1]):
-        v = pverts[s]
+        v = np.int64(pverts[s])  # one _lbs signature for every caller
         x, y, z = _lbs_j(v, ia, points, ji, jw, mats)
         d0 = math.sqrt((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2)
         x, y, z = _lbs_j(v, ib, points, ji, jw, mats)

@@ -96,7 +96,7 @@ def _skin_frames_serial(points, ji, jw, m, out):
 def _skin_subset(verts, lo, hi, points, ji, jw, m, out):
     """out[verts[i]] (n, 3) float32 for ``lo <= i < hi``: vertices skinned by pose 0 of ``m``."""
     for i in range(lo, hi):
-        v = verts[i]
+        v = np.int64(verts[i])
         x, y, z = _lbs(v, 0, points, ji, jw, m)
         out[v, 0] = x
         out[v, 1] = y
@@ -119,7 +119,7 @@ def _farthest_task(task, nb, points, ji, jw, m, poff, pverts, centers, todo, out
     if not any_todo:
         return
     for s in range(poff[p], poff[p + 1]):
-        v = pverts[s]
+        v = np.int64(pverts[s])  # one _lbs signature for every caller
         for f in range(f0, f1):
             if not todo[f, p]:
                 continue
