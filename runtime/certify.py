@@ -166,7 +166,7 @@ def sampled(rig: Rig, skel, tol_abs: float, tol_rel: float, exact=None) -> Sampl
 # -------------------------------------------------------------------- continuous time
 def factor_bounds(clip, times, rest_local):
     """Per sample interval and joint: the local transforms at both ends and the bounds the chain
-    recursion (:func:`runtime.kernels.bounds._chain_bounds_serial`) needs.
+    recursion (:func:`runtime.kernels.bounds.chain_bounds`) needs.
 
     For a joint the clip animates, over an interval with ends ``(t0, q0, s0)``, ``(t1, q1, s1)``
     (time normalised to [0, 1]): the translation moves by ``dt = |t1 - t0|`` at constant speed;
@@ -281,7 +281,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
       world transform, N_J is a similarity at each time and the ratio ``s_lo / s_hi`` is exactly 1.
       Non-uniform scales on the path make the certificate conservative (it may then report an
       interval as undecided).
-    * Chord deviation of a ball's copy: ``delta_b`` of :func:`runtime.kernels.bounds._chain_bounds_serial`.
+    * Chord deviation of a ball's copy: ``delta_b`` of :func:`runtime.kernels.bounds.chain_bounds`.
     * Level A1 (continuous test K): ``|y_v(tau) - c| <= a_P max_b (max(e0_b, e1_b) + delta_b +
       lam_b r_b) + eps_P |c_P|`` (the ball's centre is within ``delta_b`` of its chord, whose points
       are within the larger end distance; the ball's points within ``lam_b r_b`` of it).
@@ -291,7 +291,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
       sampled proof's bounds of the farthest vertex at both ends, in J space), so the bound is
       ``max(D0, D1) + min(a_P max_b delta_b, sum_b wmax_b delta_b)``.
     * Level B: the same per vertex, with both ends skinned exactly
-      (:func:`runtime.kernels.bounds._chord_tasks_serial`).
+      (:func:`runtime.kernels.bounds.chord_tasks`).
     * Level C: halve the interval (UsdSkel's interpolation evaluated at the midpoint by the
       runtime's port, :mod:`runtime.kernels.pose`); on a sub-interval of fraction f the
       recursion's velocities scale by f and accelerations by f^2 (the magnitudes bounded on the
@@ -454,13 +454,10 @@ def _refine(rig, clip, times, fac, delta, pert, own, pair_part, todo, out, tol_a
             tb.append(mats.get(b, J))
             tr.append(rows[(i, p)])
             ts.append(frac * frac)
-        n = len(nodes)
-        res = [np.empty(n), np.empty(n, np.int64), np.empty(n), np.empty(n, np.int64), np.empty(n),
-               np.empty(n, np.int64)]
-        B.chord_tasks(rig.points, rig.joint_indices, rig.joint_weights, mats.array(), rig.vert_offsets, rig.verts,
-                       bd.part_centers, np.array(tp, np.int64), np.array(ta, np.int64), np.array(tb, np.int64),
-                       np.array(tr, np.int64), np.array(ts), drow, prow, *res)
-        u, vu, d0, v0, d1, v1 = res
+        u, vu, d0, v0, d1, v1 = B.chord_tasks(
+            rig.points, rig.joint_indices, rig.joint_weights, mats.array(), rig.vert_offsets, rig.verts,
+            bd.part_centers, np.array(tp, np.int64), np.array(ta, np.int64), np.array(tb, np.int64),
+            np.array(tr, np.int64), np.array(ts), drow, prow)
         nxt = []
         for n_, (i, p, a, b, depth) in enumerate(nodes):
             key = (i, p)

@@ -266,10 +266,11 @@ class Pose:
     """The collider at one pose: skinned points, part spheres, queries.
 
     Made by :meth:`Collider.pose` (a clip at a time) or :meth:`Collider.pose_from_joints` (any
-    joint-local pose).  Posing is lazy: :meth:`set` computes the joints, the part spheres and
+    joint-local pose).  Posing is lazy: :meth:`set` computes the joints; the part spheres and
     provable culling spheres (tests K and D of :mod:`runtime.kernels.bounds`, no vertex
-    skinned); a query skins only the parts it reaches, and reading :attr:`points` skins the rest
-    (same numbers either way).
+    skinned) are computed when first read (by a query, or :attr:`spheres` / :attr:`cull`), so a
+    program that only reads points never compiles the bounds kernel; a query skins only the
+    parts it reaches, and reading :attr:`points` skins the rest (same numbers either way).
 
     Attributes
     ----------
@@ -295,8 +296,9 @@ class Pose:
         self._points = np.empty((V, 3), dtype=np.float32)
         self._points1 = self._points.reshape(1, V, 3)  # the skinning kernel's (F, V, 3) view
         self._full = -1  # version at which every vertex was skinned
-        self.spheres = np.empty((P, 4))
-        self.cull = np.empty((P, 4))
+        self._spheres = np.empty((P, 4))
+        self._cull = np.empty((P, 4))
+        self._bounded = -1  # version at which spheres and cull were computed
         self.refit = np.zeros(P, dtype=bool)
         self.skel_transforms = np.empty((J, 4, 4))
         self.skinning_transforms = np.empty((J, 4, 4))
@@ -366,13 +368,33 @@ class Pose:
             prim = d.stage.GetPrimAtPath(d.skeleton_path)
             self.local_to_world = schema.matrices_from_usd(UsdGeom.Imageable(prim).ComputeLocalToWorldTransform(time))
 
+    @property
+    def spheres(self) -> np.ndarray:
+        """(P, 4) float64 part sphere centres + radii at this pose (computed on first read)."""
+        self._bounds()
+        return self._spheres
+
+    @property
+    def cull(self) -> np.ndarray:
+        """(P, 4) float64 culling spheres at this pose (computed on first read)."""
+        self._bounds()
+        return self._cull
+
     def _posed(self):
         d = self._data
         PK._compose(self._local, d.parents, d.topo_order, d.inv_bind, d.geom_bind, self.local_to_world,
                     self.skel_transforms, self.skinning_transforms, self.joint_world, self._skin_world)
         self._version += 1
+        if not self.collider.lazy:
+            self._bounds()
+
+    def _bounds(self):
+        if self._bounded == self._version:
+            return
+        self._bounded = self._version
+        d = self._data
         B._pose_bounds_serial(self._world1, *d.bounds.args(), self._sph, self._kb, self._db)
-        B._cull_spheres(self._sph, self._kb, self._db, self.spheres, self.cull)
+        B._cull_spheres(self._sph, self._kb, self._db, self._spheres, self._cull)
         if not self.collider.lazy:
             self._skin_all()
             d_, _ = SK.part_farthest(d.rest_points, d.joint_indices, d.joint_weights, self._skin_world,
@@ -383,7 +405,7 @@ class Pose:
     def _refit(self):
         """Parts whose stored sphere the bounds cannot prove: the bound's sphere when it is at
         most :data:`REFIT_FROM_BOUND` times larger, else the farthest skinned vertex."""
-        s = self.spheres
+        s = self.spheres  # computes the bounds
         bound = np.minimum(self._kb[0], self._db[0])
         grow = ~(bound <= s[:, 3])
         self.refit[:] = grow

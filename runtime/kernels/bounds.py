@@ -50,8 +50,7 @@ import numpy as np
 from numba import njit, prange
 
 from .config import FASTMATH_PROOF as _FM
-from .skin import PARALLEL_WORK
-from .skin import _lbs as _lbs_j
+from .skin import PARALLEL_WORK, skin_frames
 
 #: Relative padding of every bound (float64 rounding of the few dozen operations behind it).
 ROUND = 1e-12
@@ -90,7 +89,7 @@ def _xf(m, x, y, z):
             m[2, 0] * x + m[2, 1] * y + m[2, 2] * z + m[2, 3])
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=_FM)
 def _pose_bound(f, p, world, part_joint, part_centers, part_radii, pj_offsets, pj_joint, pj_center,
                 pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db, e, E):
     """Part ``p`` at pose ``f``: sphere ``sph[f, p]`` (centre, radius), bounds ``kb[f, p]`` (test
@@ -349,7 +348,14 @@ def _cull_spheres(sph, kb, db, spheres, cull):
 
 
 # ------------------------------------------------------------------ continuous time (chords)
-@njit(cache=True, fastmath=_FM)
+#: The chord bounds below are numpy over the one skinning kernel (no kernel of their own to
+#: compile on a new user's first import or validation); the chain bounds are a kernel (numpy was
+#: 10x slower on the proof benchmark).
+#: :func:`chord_tasks` handles at most this many (task, vertex, influence) terms at once.
+CHORD_BLOCK = 1 << 14
+
+
+@njit(cache=True, inline="always", fastmath=_FM)
 def _chain_task(i, k, L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert):
     """Pair ``k`` over interval ``i`` of :func:`_chain_bounds_serial`."""
     a0x, a0y, a0z = pj_center[k, 0], pj_center[k, 1], pj_center[k, 2]
@@ -447,45 +453,8 @@ def chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, 
     kern(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert)
 
 
-@njit(cache=True, fastmath=_FM)
-def _chord_task(t, points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
-    """Task ``t`` of :func:`_chord_tasks_serial`."""
-    p = task_part[t]
-    ia, ib, row, sc = task_a[t], task_b[t], task_delta[t], task_scale[t]
-    cx, cy, cz = centers[p, 0], centers[p, 1], centers[p, 2]
-    bu, bd0, bd1 = -1.0, -1.0, -1.0
-    vu, v0, v1 = -1, -1, -1
-    for s in range(poff[p], poff[p + 1]):
-        v = np.int64(pverts[s])  # one _lbs signature for every caller
-        x, y, z = _lbs_j(v, ia, points, ji, jw, mats)
-        d0 = math.sqrt((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2)
-        x, y, z = _lbs_j(v, ib, points, ji, jw, mats)
-        d1 = math.sqrt((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2)
-        dev = 0.0
-        for i in range(ji.shape[1]):
-            w = abs(np.float64(jw[v, i]))
-            if w != 0.0:
-                dev += w * (sc * delta[row, ji[v, i]] + pert[row, ji[v, i]])
-        u = max(d0, d1) + dev
-        if not (u <= bu):
-            bu = u if u == u else np.inf
-            vu = v
-        if not (d0 <= bd0):
-            bd0 = d0 if d0 == d0 else np.inf
-            v0 = v
-        if not (d1 <= bd1):
-            bd1 = d1 if d1 == d1 else np.inf
-            v1 = v
-    out_u[t] = bu * (1.0 + ROUND)
-    out_vu[t] = vu
-    out_d0[t] = bd0
-    out_v0[t] = v0
-    out_d1[t] = bd1
-    out_v1[t] = v1
-
-
-@njit(cache=True, fastmath=_FM)
-def _chord_tasks_serial(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
+def chord_tasks(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale,
+                delta, pert):
     """Per-vertex chord bound of (part, time interval) tasks.
 
     Task ``t``: part ``p = task_part[t]``; the J-space skinning transforms of the interval's two
@@ -497,22 +466,43 @@ def _chord_tasks_serial(points, ji, jw, mats, poff, pverts, centers, task_part, 
     ``U(v) = max(|y_v(a) - c|, |y_v(b) - c|) + sum_i |w_i(v)| (scale delta + pert)[j_i(v)]`` bounds
     ``|y_v(tau) - c|`` on the whole sub-interval (LBS is linear in the joint transforms, so the
     vertex strays from its chord by at most the weighted strays of its copies; the chord stays
-    within the larger end distance).  Out: the largest U and its vertex, the largest end
-    distances and their vertices."""
-    for t in range(task_part.shape[0]):
-        _chord_task(t, points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1)
+    within the larger end distance).  Returns (T,) arrays: the largest U and its vertex, the largest end
+    distances and their vertices.
+
+    numpy, one part at a time: the part's vertices are skinned at every transform its tasks
+    name by the one skinning kernel (:func:`runtime.kernels.skin.skin_frames`, float64)."""
+    T = len(task_part)
+    out_u, out_d0, out_d1 = np.empty(T), np.empty(T), np.empty(T)
+    out_vu, out_v0, out_v1 = (np.full(T, -1, np.int64) for _ in range(3))
+    for p in np.unique(task_part):
+        t_all = np.flatnonzero(task_part == p)
+        vs = pverts[poff[p]:poff[p + 1]]
+        if len(vs) == 0:  # nothing to hold
+            out_u[t_all], out_d0[t_all], out_d1[t_all] = -1.0, -1.0, -1.0
+            continue
+        step = max(1, CHORD_BLOCK // (len(vs) * ji.shape[1]))
+        for s in range(0, len(t_all), step):
+            _chord_block(t_all[s:s + step], p, vs, points, ji, jw, mats, centers, task_a, task_b, task_delta,
+                         task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1)
+    return out_u, out_vu, out_d0, out_v0, out_d1, out_v1
 
 
-@njit(cache=True, parallel=True, fastmath=_FM)
-def _chord_tasks_parallel(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
-    """:func:`_chord_tasks_serial` over threads (large inputs; see :func:`chord_tasks`)."""
-    for t in prange(task_part.shape[0]):
-        _chord_task(t, points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1)
-
-
-def chord_tasks(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
-    """Run :func:`_chord_tasks_serial` (or its threaded twin above :data:`PARALLEL_WORK`
-    vertex-influence evaluations)."""
-    work = int(np.diff(poff)[task_part].sum()) * ji.shape[1] * 2 if len(task_part) else 0
-    kern = _chord_tasks_parallel if work > PARALLEL_WORK else _chord_tasks_serial
-    kern(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1)
+def _chord_block(t, p, vs, points, ji, jw, mats, centers, task_a, task_b, task_delta, task_scale, delta, pert,
+                 out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
+    """:func:`chord_tasks` for the tasks ``t`` of part ``p`` (vertices ``vs``)."""
+    need, inv = np.unique(np.r_[task_a[t], task_b[t]], return_inverse=True)
+    y = skin_frames(points[vs], ji[vs], jw[vs], mats[need], dtype=np.float64)  # (R, n, 3)
+    y -= centers[p]
+    d = np.sqrt(np.einsum("rvi,rvi->rv", y, y))
+    d = np.where(d <= 1e300, d, np.inf)  # NaN reads as far
+    d0, d1 = d[inv[:len(t)]], d[inv[len(t):]]
+    x = task_scale[t, None] * delta[task_delta[t]] + pert[task_delta[t]]  # (n_t, J)
+    w = np.abs(jw[vs].astype(np.float64))
+    dev = np.einsum("tvk,vk->tv", x[:, ji[vs]], w)
+    u = np.maximum(d0, d1) + dev
+    u = np.where(u <= 1e300, u, np.inf)
+    for arr, vals, vout in ((out_u, u, out_vu), (out_d0, d0, out_v0), (out_d1, d1, out_v1)):
+        i = np.argmax(vals, axis=1)
+        arr[t] = vals[np.arange(len(t)), i]
+        vout[t] = vs[i]
+    out_u[t] *= (1.0 + ROUND)
