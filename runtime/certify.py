@@ -192,7 +192,7 @@ def factor_bounds(clip, times, rest_local):
     Returns a dict of (I, J, ...) float64 arrays: L0, L1, Li0, Li1, fw, iv, dt, eps."""
     times = np.asarray(times, dtype=np.float64)
     L, t, q, s = PK.locals_at(clip, times, rest_local, trs=True)
-    Li = np.linalg.inv(L)
+    Li = _inv_affine(L)
     I, J = len(times) - 1, len(rest_local)
     fw = np.zeros((I, J, 3))
     iv = np.zeros((I, J, 3))
@@ -212,10 +212,10 @@ def factor_bounds(clip, times, rest_local):
         om = OMEGA_MARGIN * theta
         al = ALPHA_MARGIN * theta ** 2
         sa = np.abs(s)
-        smax = np.maximum(sa[:-1].max(-1), sa[1:].max(-1))
-        smin = np.minimum(sa[:-1].min(-1), sa[1:].min(-1))
-        smin = np.where((np.sign(s[:-1]) != np.sign(s[1:])).any(-1), 0.0, smin)
-        ds = np.abs(s[1:] - s[:-1]).max(-1)
+        smax = np.maximum(_max3(sa[:-1]), _max3(sa[1:]))
+        smin = np.minimum(_min3(sa[:-1]), _min3(sa[1:]))
+        smin = np.where(_max3(np.sign(s[:-1]) != np.sign(s[1:])), 0.0, smin)
+        ds = _max3(np.abs(s[1:] - s[:-1]))
         with np.errstate(divide="ignore", invalid="ignore"):
             inv_s = np.where(smin > 0, 1.0 / smin, np.inf)
         fw[:, a] = np.stack([smax, om * smax + ds, al * smax + 2 * om * ds], -1)
@@ -226,12 +226,39 @@ def factor_bounds(clip, times, rest_local):
         e = np.where(ds > 0, 3.0 * 2.0 ** -11 * smax, 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             ei = np.where(e > 0, e / (smin * (smin - e)), 0.0)
-        iso[:, a] = (np.ptp(s[:-1], axis=-1) == 0) & (np.ptp(s[1:], axis=-1) == 0)  # uniform at both ends
+        iso[:, a] = (_max3(s[:-1]) == _min3(s[:-1])) & (_max3(s[1:]) == _min3(s[1:]))  # uniform at both ends
         eps[:, a, 0] = e
         eps[:, a, 1] = np.where((e > 0) & ~(smin > e), np.inf, ei)
     return dict(L0=np.ascontiguousarray(L[:-1]), L1=np.ascontiguousarray(L[1:]),
                 Li0=np.ascontiguousarray(Li[:-1]), Li1=np.ascontiguousarray(Li[1:]), fw=fw, iv=iv, dt=dt,
                 eps=eps, iso=iso, locals=L)
+
+
+def _max3(x):
+    """Largest of the last axis (length 3): numpy reduces such short axes slowly."""
+    return np.maximum(np.maximum(x[..., 0], x[..., 1]), x[..., 2])
+
+
+def _min3(x):
+    return np.minimum(np.minimum(x[..., 0], x[..., 1]), x[..., 2])
+
+
+def _inv_affine(L):
+    """Inverses of (..., 4, 4) affine matrices (last row 0 0 0 1) by the 3x3 cofactors: a few
+    vectorised operations instead of one LAPACK call per matrix."""
+    m = L[..., :3, :3]
+    c = np.empty_like(m)  # the adjugate (transposed cofactors), row by row
+    c[..., 0, :] = np.cross(m[..., :, 1], m[..., :, 2])
+    c[..., 1, :] = np.cross(m[..., :, 2], m[..., :, 0])
+    c[..., 2, :] = np.cross(m[..., :, 0], m[..., :, 1])
+    det = np.einsum("...i,...i->...", m[..., :, 0], c[..., 0, :])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = c / det[..., None, None]
+    out = np.zeros_like(L)
+    out[..., :3, :3] = inv
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", inv, L[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
 
 
 def _norm2(lin):
