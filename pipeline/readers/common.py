@@ -1,4 +1,4 @@
-"""Helpers shared by the readers: input checks, allocation cap, influence packing, frame rates."""
+"""Helpers shared by the readers: input checks, allocation cap, influence packing, clip names."""
 
 from __future__ import annotations
 
@@ -8,9 +8,6 @@ import numpy as np
 
 from ..errors import InputError
 from ..tolerances import ALLOC_FACTOR, ALLOC_FLOOR
-
-#: Frame rates a time step is snapped to when inferring a file's rate from its key times.
-COMMON_FPS = (8, 10, 12, 15, 23.976, 24, 25, 29.97, 30, 48, 50, 59.94, 60, 90, 100, 120, 240)
 
 
 def check_input_file(path) -> int:
@@ -81,17 +78,6 @@ def pack_influences(n: int, vertex: np.ndarray, joint: np.ndarray, weight: np.nd
     ji[vertex, slot] = joint
     jw[vertex, slot] = weight
     return ji, jw
-
-
-def infer_fps(seconds_steps, fallback: float = 24.0) -> float:
-    """Infer a frame rate from the positive time steps (seconds) between keys of a file."""
-    steps = np.asarray(seconds_steps, dtype=np.float64)
-    steps = steps[steps > 1e-6]
-    if len(steps) == 0:
-        return float(fallback)
-    fps = 1.0 / float(np.median(steps))
-    best = min(COMMON_FPS, key=lambda c: abs(fps - c))
-    return float(best) if abs(fps - best) <= 0.002 * best else round(fps, 3)
 
 
 def clip_name(raw: str, taken: set) -> str:
