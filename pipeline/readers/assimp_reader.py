@@ -190,7 +190,7 @@ def read_scene(path, budget, fbx) -> Scene:
         anims.append(Animation(a.name, chans, span))
     helpers = {i for i, n in enumerate(names) if FBX_HELPER in n}
     return Scene(names=[n.split(FBX_HELPER)[0] for n in names], parents=nparents, local=nlocal, meshes=meshes,
-                 animations=anims, helpers=helpers, fps_hint=hint,
+                 animations=anims, helpers=helpers, fps_hint=hint, unweighted_follow_node=True,
                  sampling_note="keys as assimp bakes them, lerp / slerp between")
 
 

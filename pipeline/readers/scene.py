@@ -137,6 +137,10 @@ class Scene:
     animations : list of Animation
     helpers : set of int
         Nodes never made joints by themselves (FBX pivot helpers), folded into their neighbours.
+    unweighted_follow_node : bool
+        The format's rule for a skinned mesh's vertices without any weight: they stay with the
+        mesh's node (FBX, Collada: an armature deforms only weighted vertices), bound rigidly to
+        the joint that node moves with.  Otherwise they are left unweighted for ``bind`` to judge.
     fps_hint : float or None
         The file's own declared frame rate (FBX header), tried first for the grid.
     sampling_note : str
@@ -151,6 +155,7 @@ class Scene:
     helpers: set = field(default_factory=set)
     fps_hint: float | None = None
     sampling_note: str = ""
+    unweighted_follow_node: bool = False
 
 
 # ------------------------------------------------------------------------------ sampling
@@ -344,6 +349,16 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
         missing_bones.extend((i, int(j)) for j in range(len(s.joints)) if s.joints[j] < 0)
     joint_nodes = set(used_bones)
     rigid = [i for i in chosen if all_meshes[i].skin is None]
+    unweighted = {}  # mesh index -> vertices of a skinned mesh with no weight (they follow the mesh's node)
+    if scene.unweighted_follow_node:
+        for i in chosen:
+            s = all_meshes[i].skin
+            if s is not None and all_meshes[i].node >= 0:
+                has = np.zeros(len(all_meshes[i].positions), dtype=bool)
+                has[s.vertex[s.weight > 0]] = True
+                if not has.all():
+                    unweighted[i] = np.flatnonzero(~has)
+                    rigid.append(i)  # its node's path is walked like a rigid mesh's
     # nearest bone above each rigid mesh, animated nodes on its path become joints
     for i in rigid:
         n = all_meshes[i].node
@@ -373,6 +388,10 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
             if add - joint_nodes:
                 joint_nodes |= add
                 changed = True
+    for i in unweighted:  # a node under no joint becomes a (static) root joint of its own
+        n = all_meshes[i].node
+        if not any(x in joint_nodes for x in [n] + _ancestors(parents, n)):
+            joint_nodes.add(n)
     jn = sorted(joint_nodes)  # node order is parents-first
     jpos = {n: q for q, n in enumerate(jn)}
     jparents = []
@@ -473,6 +492,17 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
             vj.append(s.vertex + base)
             jj.append(sj_of[s.joint])
             ww.append(s.weight)
+            if i in unweighted:
+                n = m.node
+                owner = n if n in jpos else next(a for a in _ancestors(parents, n) if a in jpos)
+                gu = bind[jpos[owner]] @ np.linalg.solve(nworld[owner], m.to_world)
+                u = unweighted[i]
+                q[u] = p[u] @ gu[:3, :3].T + gu[:3, 3]
+                vj.append(u + base)
+                jj.append(np.full(len(u), jpos[owner]))
+                ww.append(np.ones(len(u)))
+                notes.append(f"{len(u)} vertices of mesh {m.name!r} have no skin weight: they follow its node "
+                             f"{names[n]!r} (bound to joint {names[owner]!r}), as the source application moves them")
             mesh_info.append({"name": m.name, "kind": "skinned", "vertices": nv})
         pos_list.append(q)
         tri_list.append(m.triangles + base)

@@ -11,8 +11,9 @@ Layout (``<Name>`` is the source file's stem made a valid identifier)::
                             customData["colossus"] = provenance
     /<Name>/<clip>          SkelAnimation per clip, one time sample per source frame
 
-The file is written to a temporary name in the output directory and renamed into place, so a
-failed import never leaves a partial asset behind.
+The file is written to a temporary name in the output directory, re-opened with usd-core and
+checked (:func:`_check_written`), and only then renamed into place: a failed import never leaves
+a partial asset behind, and nothing usd-core cannot open is ever written.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from runtime import schema
 
 from ..errors import OutputError
 from ..model import SkinnedMesh
-from ..xforms import decompose_trs
+from ..xforms import compose_trs, decompose_trs
 from . import StageReport
 
 OUTPUT_EXTENSIONS = (".usda", ".usdc", ".usd")
@@ -75,6 +76,25 @@ def check_output_path(out_path) -> str:
     return out
 
 
+def stored_clips(mesh: SkinnedMesh) -> SkinnedMesh:
+    """``mesh`` with every clip's joint-local transforms as the asset will store them.
+
+    UsdSkel stores each joint's translation as ``float3``, rotation as ``quatf`` and scale as
+    ``half3`` (the SkelAnimation schema's types).  Half precision moves an animated scale by up to
+    ``2**-11`` of itself; the spheres must be computed on the motion the asset really has, so the
+    pipeline rounds the clips the same way before the ``spheres`` stage (``write`` then stores
+    exactly these values).
+    """
+    clips = []
+    for c in mesh.clips:
+        t, q, s = decompose_trs(c.local)
+        t = t.astype(np.float32).astype(np.float64)
+        q = q.astype(np.float32).astype(np.float64)
+        s = s.astype(np.float16).astype(np.float64)
+        clips.append(type(c)(c.name, c.times, compose_trs(t, q, s)))
+    return mesh.replace(clips=tuple(clips))
+
+
 def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
     """Write ``mesh`` (baked, welded, oriented, bound, with parts and spheres) as a USD asset.
 
@@ -97,6 +117,9 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
     out = check_output_path(out_path)
     if mesh.parts is None:
         raise ValueError("write needs a mesh with parts (run the parts and spheres stages)")
+    tcps = float(mesh.time_codes_per_second)
+    if not (np.isfinite(tcps) and tcps > 0):
+        raise ValueError(f"write: timeCodesPerSecond must be a positive number, got {tcps}")
     ext = os.path.splitext(out)[1].lower()
     folder = os.path.dirname(os.path.abspath(out))
     from pxr import Tf
@@ -129,11 +152,14 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         # -- clips ---------------------------------------------------------------------------
         taken = set(RESERVED)
         clip_paths = []
+        sampled = {c["name"]: c for c in mesh.source.get("clip_info", [])}
         for clip in mesh.clips:
             name = _ident(clip.name, taken)
             anim = UsdSkel.Animation.Define(stage, root_path.AppendChild(name))
             if name != clip.name:
                 anim.GetPrim().SetCustomDataByKey(schema.CLIP_NAME_KEY, clip.name)
+            if clip.name in sampled:
+                anim.GetPrim().SetCustomDataByKey(schema.CLIP_SOURCE_KEY, _clip_source(sampled[clip.name], mesh))
             anim.CreateJointsAttr(Vt.TokenArray(jpaths))
             t, q, s = decompose_trs(clip.local)
             ta, ra, sa = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr(), anim.CreateScalesAttr()
@@ -177,6 +203,7 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         stage.GetRootLayer().documentation = f"Collider asset written by colossus from {mesh.source.get('file', '?')}"
         stage.GetRootLayer().Save()
         del stage
+        _check_written(tmp, out, root_path, tcps)
         os.replace(tmp, out)
     except OSError as exc:
         _unlink(tmp)
@@ -190,6 +217,44 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
     size = os.path.getsize(out)
     return mesh, StageReport("write", counts={"path": out, "bytes": size, "clips": len(mesh.clips),
                                               "joints": mesh.joint_count, "parts": len(parts)})
+
+
+def _clip_source(info: dict, mesh: SkinnedMesh) -> dict:
+    """How a clip was sampled from its source, for its SkelAnimation's customData."""
+    out = {"sourceName": str(info.get("source_name") or ""), "sourceKeys": int(info["source_keys"]),
+           "interpolation": str(info["interpolation"]), "sampling": str(info["sampling"]),
+           "keysOnGrid": bool(info["keys_on_grid"])}
+    if "error_bound_relative" in info:
+        from ..tolerances import model_scale
+        out["errorBound"] = float(info["error_bound_relative"] * model_scale(mesh.positions))
+        out["errorBoundRelative"] = float(info["error_bound_relative"])
+    return out
+
+
+def _check_written(tmp, out, root_path, tcps) -> None:
+    """Re-open the file just written with usd-core and check what every consumer relies on
+    first (it opens; frame rates positive; the default prim is the SkelRoot), raising
+    :class:`OutputError` before the rename otherwise."""
+    from pxr import Sdf, Tf, Usd
+
+    try:
+        layer = Sdf.Layer.OpenAsAnonymous(tmp)
+    except Tf.ErrorException as exc:
+        raise OutputError(f"{out}: usd-core cannot re-open the asset just written ({' '.join(str(exc).split())[:200]})") from None
+    if layer is None:
+        raise OutputError(f"{out}: usd-core cannot re-open the asset just written")
+    problems = []
+    for key in ("timeCodesPerSecond", "framesPerSecond"):
+        v = layer.pseudoRoot.GetInfo(key) if layer.pseudoRoot.HasInfo(key) else None
+        if v is None or not (float(v) > 0) or abs(float(v) - tcps) > 1e-9 * tcps:
+            problems.append(f"{key} is {v}, expected {tcps:g}")
+    if layer.defaultPrim != root_path.name or not layer.GetPrimAtPath(root_path):
+        problems.append(f"defaultPrim is {layer.defaultPrim!r}, expected {root_path.name!r}")
+    stage = Usd.Stage.Open(layer)
+    if stage is None or not stage.GetDefaultPrim() or stage.GetDefaultPrim().GetTypeName() != "SkelRoot":
+        problems.append("the default prim is not a SkelRoot")
+    if problems:
+        raise OutputError(f"{out}: the asset just written is not valid USD ({'; '.join(problems)}); nothing written")
 
 
 def _plain(d):
