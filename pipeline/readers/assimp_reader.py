@@ -99,7 +99,7 @@ def read_scene(path, budget, fbx) -> Scene:
         raise InputError(path, "assimp returned no scene (empty or unsupported file)")
 
     names, nparents, nlocal, nmeshes = _flatten(scene.root_node)
-    check_finite(path, "node transforms", nlocal.reshape(len(names), -1))
+    check_finite(path, "node transforms", nlocal.reshape(len(names), 16))
     index_of = {}
     for i, n in enumerate(names):
         index_of.setdefault(n, i)

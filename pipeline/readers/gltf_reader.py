@@ -239,7 +239,7 @@ def read_scene(path, budget: AllocationBudget) -> Scene:
         local = np.array([_node_matrix(nodes[i]) for i in order]) if k else np.zeros((0, 4, 4))
     except (ValueError, TypeError) as exc:
         raise InputError(path, f"a node has a bad transform: {exc}") from None
-    check_finite(path, "node transforms", local.reshape(k, -1))
+    check_finite(path, "node transforms", local.reshape(k, 16))
     world = np.empty_like(local)
     for q, p in enumerate(parents):
         world[q] = local[q] if p < 0 else world[p] @ local[q]
@@ -255,7 +255,7 @@ def read_scene(path, budget: AllocationBudget) -> Scene:
             if ibm.shape != (len(joints), 16):
                 raise InputError(path, f"skin {i}: {len(ibm)} inverse bind matrices for {len(joints)} joints")
             ibm = ibm.reshape(-1, 4, 4).transpose(0, 2, 1)
-            check_finite(path, f"skin {i} inverse bind matrices", ibm.reshape(len(joints), -1))
+            check_finite(path, f"skin {i} inverse bind matrices", ibm.reshape(len(joints), 16))
         else:
             ibm = np.tile(np.eye(4), (len(joints), 1, 1))
         skins.append((np.array([new[j] for j in joints], dtype=np.int64), ibm))

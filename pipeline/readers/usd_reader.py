@@ -223,9 +223,9 @@ def read_usd(path, meshes=None, fps=None):
             if len(ji) and (ji.max() >= len(lut) or ji.min() < 0):
                 raise InputError(path, f"mesh {name}: joint index out of range for its {len(lut)} skel:joints")
             ji = lut[ji]
+        if len(ji) and (ji.max() >= nj or ji.min() < 0):  # UsdSkel refuses these even at weight 0
+            raise InputError(path, f"mesh {name}: joint index {int(ji.max()) if ji.max() >= nj else int(ji.min())} out of range for {nj} joints")
         live = jw > 0
-        if np.any(live) and (ji[live].max() >= nj or ji[live].min() < 0):
-            raise InputError(path, f"mesh {name}: joint index out of range for {nj} joints")
         check_finite(path, f"mesh {name} joint weights", jw[:, None])
         if np.any(jw < 0):
             raise InputError(path, f"mesh {name}: negative joint weights")
