@@ -76,6 +76,27 @@ def check_output_path(out_path) -> str:
     return out
 
 
+def root_scale(mesh: SkinnedMesh) -> float:
+    """The constant uniform scale ``k`` every root joint carries in the bind pose, the rest pose
+    and on every frame of every clip (an armature object's scale, a unit conversion), or 1.0.
+
+    The writer moves it onto the Skeleton prim (``xformOp:scale``, double precision), out of the
+    SkelAnimation's ``half3`` scales, where it would be rounded (``half(0.01) / 0.01 = 1 + 2.1e-4``).
+    """
+    roots = np.flatnonzero(mesh.parents < 0)
+    if not len(roots):
+        return 1.0
+    mats = [mesh.bind_transforms[roots], mesh.rest_transforms[roots]] + [c.local[:, roots].reshape(-1, 4, 4)
+                                                                         for c in mesh.clips]
+    _, _, s = decompose_trs(np.concatenate(mats))
+    k = float(np.median(s))
+    # float32 sources give the "same" scale to ~1e-7; what is left after dividing by k rounds to
+    # exactly 1 in half precision
+    if not (np.isfinite(k) and k > 0) or np.max(np.abs(s - k)) > 1e-6 * k or abs(k - 1.0) < 1e-12:
+        return 1.0
+    return k
+
+
 def stored_clips(mesh: SkinnedMesh) -> SkinnedMesh:
     """``mesh`` with every clip's joint-local transforms as the asset will store them.
 
@@ -83,15 +104,22 @@ def stored_clips(mesh: SkinnedMesh) -> SkinnedMesh:
     ``half3`` (the SkelAnimation schema's types).  Half precision moves an animated scale by up to
     ``2**-11`` of itself; the spheres must be computed on the motion the asset really has, so the
     pipeline rounds the clips the same way before the ``spheres`` stage (``write`` then stores
-    exactly these values).
+    exactly these values).  The roots' common scale (:func:`root_scale`) is taken out first, as
+    the writer does, so it is not rounded.
     """
+    k = root_scale(mesh)
+    roots = mesh.parents < 0
     clips = []
     for c in mesh.clips:
-        t, q, s = decompose_trs(c.local)
+        local = c.local.copy()
+        local[:, roots, :3, :] /= k
+        t, q, s = decompose_trs(local)
         t = t.astype(np.float32).astype(np.float64)
         q = q.astype(np.float32).astype(np.float64)
         s = s.astype(np.float16).astype(np.float64)
-        clips.append(type(c)(c.name, c.times, compose_trs(t, q, s)))
+        out = compose_trs(t, q, s)
+        out[:, roots, :3, :] *= k
+        clips.append(type(c)(c.name, c.times, out))
     return mesh.replace(clips=tuple(clips))
 
 
@@ -146,8 +174,17 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         jpaths = joint_paths(mesh.joint_names, mesh.parents)
         skel.CreateJointsAttr(Vt.TokenArray(jpaths))
         skel.CreateJointNamesAttr(Vt.TokenArray(list(mesh.joint_names)))
-        skel.CreateBindTransformsAttr(schema.matrices_to_usd(mesh.bind_transforms))
-        skel.CreateRestTransformsAttr(schema.matrices_to_usd(mesh.rest_transforms))
+        # the roots' common scale goes onto the Skeleton prim in double precision (see root_scale)
+        k = root_scale(mesh)
+        roots = mesh.parents < 0
+        unscale = np.diag([1.0 / k, 1.0 / k, 1.0 / k, 1.0])
+        bind_k = unscale @ mesh.bind_transforms
+        rest_k = mesh.rest_transforms.copy()
+        rest_k[roots] = unscale @ rest_k[roots]
+        if k != 1.0:
+            UsdGeom.Xformable(skel.GetPrim()).AddScaleOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(k, k, k))
+        skel.CreateBindTransformsAttr(schema.matrices_to_usd(bind_k))
+        skel.CreateRestTransformsAttr(schema.matrices_to_usd(rest_k))
 
         # -- clips ---------------------------------------------------------------------------
         taken = set(RESERVED)
@@ -161,7 +198,9 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
             if clip.name in sampled:
                 anim.GetPrim().SetCustomDataByKey(schema.CLIP_SOURCE_KEY, _clip_source(sampled[clip.name], mesh))
             anim.CreateJointsAttr(Vt.TokenArray(jpaths))
-            t, q, s = decompose_trs(clip.local)
+            local = clip.local.copy()
+            local[:, roots] = unscale @ local[:, roots]
+            t, q, s = decompose_trs(local)
             ta, ra, sa = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr(), anim.CreateScalesAttr()
             qxyzw = np.ascontiguousarray(q, dtype=np.float32)
             for f, code in enumerate(clip.times):
@@ -189,8 +228,9 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         k = mesh.joint_indices.shape[1]
         binding.CreateJointIndicesPrimvar(False, k).Set(Vt.IntArray.FromNumpy(mesh.joint_indices.reshape(-1).astype(np.int32)))
         binding.CreateJointWeightsPrimvar(False, k).Set(Vt.FloatArray.FromNumpy(mesh.joint_weights.reshape(-1).astype(np.float32)))
-        if not np.allclose(mesh.geom_bind, np.eye(4), rtol=0, atol=1e-12):
-            binding.CreateGeomBindTransformAttr(schema.matrices_to_usd(mesh.geom_bind))
+        geom_bind = unscale @ mesh.geom_bind  # points stay where they are; skeleton space is scaled by k
+        if not np.allclose(geom_bind, np.eye(4), rtol=0, atol=1e-12):
+            binding.CreateGeomBindTransformAttr(schema.matrices_to_usd(geom_bind))
         UsdPhysics.CollisionAPI.Apply(geo.GetPrim())
         UsdPhysics.MeshCollisionAPI.Apply(geo.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.none)
 
