@@ -126,6 +126,40 @@ def read_warnings(m: SkinnedMesh) -> list:
     return out
 
 
+def settings_from_provenance(settings: dict) -> ImportSettings:
+    """The :class:`ImportSettings` an asset was made with, from its provenance ``settings``
+    dictionary (empty strings stand for None; the mesh list was stored comma-separated)."""
+    base = asdict(ImportSettings())
+    out = {}
+    for k, default in base.items():
+        if k not in settings:
+            continue
+        v = settings[k]
+        if k == "meshes":
+            out[k] = [m for m in str(v).split(", ") if m] if not isinstance(v, (list, tuple)) else list(v)
+        elif v == "" or v is None:
+            out[k] = None if default is None else default
+        elif isinstance(default, float) or k in ("fps", "source_meters_per_unit"):
+            out[k] = float(v)
+        elif isinstance(default, int):
+            out[k] = int(v)
+        else:
+            out[k] = v
+    return ImportSettings(**out)
+
+
+def read_baked(src, settings: ImportSettings | None = None) -> SkinnedMesh:
+    """The source read and baked into the output convention exactly as ``import`` does (before
+    welding and rounding): what ``colossus validate --source`` compares an asset with."""
+    s = settings or ImportSettings()
+    s.check()
+    m = read(src, meshes=s.meshes or None, fps=s.fps)
+    if s.source_up_axis or s.source_meters_per_unit:
+        m = m.replace(up_axis=s.source_up_axis or m.up_axis,
+                      meters_per_unit=s.source_meters_per_unit or m.meters_per_unit)
+    return bake(m, s.up_axis, s.meters_per_unit)[0]
+
+
 def build_collider(src, settings: ImportSettings | None = None, progress=None):
     """Run every stage but ``write``: returns ``(mesh, reports)``.
 
