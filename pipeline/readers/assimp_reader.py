@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import InputError
 from .common import AllocationBudget, check_finite, check_input_file
-from .fbx_header import read_anim_stacks, read_global_settings, read_morph_geometry
+from .fbx_header import read_anim_stacks, read_global_settings, read_inherit_types, read_morph_geometry
 from .scene import Animation, Channel, Scene, SceneMesh, Skin, build
 
 FBX_HELPER = "_$AssimpFbx$_"
@@ -189,9 +189,32 @@ def read_scene(path, budget, fbx) -> Scene:
                 chans.append(Channel(node, path_, t / tps + shift, v, "LINEAR"))
         anims.append(Animation(a.name, chans, span))
     helpers = {i for i, n in enumerate(names) if FBX_HELPER in n}
+    rrs = _segment_scale_nodes(names, nparents, read_inherit_types(path)) if ext == ".fbx" else {}
     return Scene(names=[n.split(FBX_HELPER)[0] for n in names], parents=nparents, local=nlocal, meshes=meshes,
                  animations=anims, helpers=helpers, fps_hint=hint, unweighted_follow_node=True,
+                 no_parent_scale=rrs,
                  sampling_note="keys as assimp bakes them, lerp / slerp between")
+
+
+def _segment_scale_nodes(names, parents, inherit) -> dict:
+    """``{top node of a model: node holding its parent model's scale}`` for FBX models with
+    ``InheritType`` 2 (no parent scale: Maya's segment scale compensation).
+
+    assimp splits a model with pivots into a chain ``M_$AssimpFbx$_Translation -> ... -> M``; its
+    top node is where the parent's scale must be undone, and a parent's scale sits in its
+    ``_$AssimpFbx$_Scaling`` helper when it has one, else in the model's own node."""
+    model_of = [n.split(FBX_HELPER)[0] for n in names]
+    out = {}
+    for i, n in enumerate(names):
+        if inherit.get(model_of[i]) != 2:
+            continue
+        p = parents[i]
+        if p < 0 or model_of[p] == model_of[i]:
+            continue  # not the top of its chain
+        parent_model = model_of[p]
+        scale_node = next((k for k, m in enumerate(names) if m == f"{parent_model}{FBX_HELPER}Scaling"), p)
+        out[i] = scale_node
+    return out
 
 
 def read_assimp(path, meshes=None, fps=None):

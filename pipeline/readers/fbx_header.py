@@ -89,6 +89,38 @@ def read_anim_stacks(path) -> dict:
         return {}
 
 
+def read_inherit_types(path) -> dict:
+    """``{model name: InheritType}`` for every FBX ``Model`` whose ``InheritType`` is authored
+    (0 RrSs... FbxTransform::EInheritType: 0 eInheritRrSs, 1 eInheritRSrs, 2 eInheritRrs; Maya's
+    joints with segment scale compensation are 2).  Binary FBX only; ``{}`` when unreadable."""
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+        if not data.startswith(_MAGIC):
+            return {}
+        nodes, props, sentinel = _walker(data)
+        out = {}
+        for top, _, _, children_at, end in nodes(27, len(data)):
+            if top != "Objects":
+                continue
+            for cname, p_at, p_n, c_children, c_end in nodes(children_at, end - sentinel + 1):
+                if cname != "Model" or p_n < 2:
+                    continue
+                vals = props(p_at, 2)
+                name = str(vals[1]).split("\x00")[0].split("::")[-1]
+                for pname, _, _, pc, pe in nodes(c_children, c_end - sentinel + 1):
+                    if pname != "Properties70":
+                        continue
+                    for q, q_at, q_n, _, _ in nodes(pc, pe - sentinel + 1):
+                        if q == "P" and q_n >= 5:
+                            v = props(q_at, q_n)
+                            if v[0] == "InheritType":
+                                out[name] = int(v[4])
+        return out
+    except (OSError, struct.error, IndexError, ValueError, UnicodeError, zlib_error):
+        return {}
+
+
 def _walker(data: bytes):
     version = struct.unpack_from("<I", data, 23)[0]
     wide = version >= 7500

@@ -141,6 +141,10 @@ class Scene:
         The format's rule for a skinned mesh's vertices without any weight: they stay with the
         mesh's node (FBX, Collada: an armature deforms only weighted vertices), bound rigidly to
         the joint that node moves with.  Otherwise they are left unweighted for ``bind`` to judge.
+    no_parent_scale : dict
+        ``{node: scale node}``: nodes that do not inherit their parent's scale (FBX
+        ``InheritType`` 2, Maya's segment scale compensation): ``world = parent_world @ T @
+        inv(S_parent) @ R @ S``, with ``S_parent`` the scale of the ``scale node``'s local transform.
     fps_hint : float or None
         The file's own declared frame rate (FBX header), tried first for the grid.
     sampling_note : str
@@ -156,6 +160,7 @@ class Scene:
     fps_hint: float | None = None
     sampling_note: str = ""
     unweighted_follow_node: bool = False
+    no_parent_scale: dict = field(default_factory=dict)
 
 
 # ------------------------------------------------------------------------------ sampling
@@ -228,11 +233,21 @@ def grid_frames(seconds: np.ndarray, fps: float) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------ building
-def _world(local, parents):
-    """World transforms of nodes in parents-first order; ``local`` is (..., k, 4, 4)."""
+def _world(local, parents, no_parent_scale=None):
+    """World transforms of nodes in parents-first order; ``local`` is (..., k, 4, 4).
+
+    ``no_parent_scale`` ``{node: scale node}``: those nodes compose as
+    ``parent_world @ T @ inv(S) @ (R S)`` with ``S`` the scale of ``local[scale node]`` (FBX
+    segment scale compensation), i.e. their local's 3x3 left-multiplied by ``inv(S)``."""
     out = np.empty_like(local)
+    rrs = no_parent_scale or {}
     for i, p in enumerate(parents):
-        out[..., i, :, :] = local[..., i, :, :] if p < 0 else out[..., p, :, :] @ local[..., i, :, :]
+        m = local[..., i, :, :]
+        if i in rrs:
+            s = np.linalg.norm(local[..., rrs[i], :3, :3], axis=-2)  # (..., 3) axis scales of the parent's local
+            m = m.copy()
+            m[..., :3, :3] = m[..., :3, :3] / s[..., :, None]
+        out[..., i, :, :] = m if p < 0 else out[..., p, :, :] @ m
     return out
 
 
@@ -270,7 +285,7 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
     """
     names, parents, nlocal = scene.names, np.asarray(scene.parents, dtype=np.int64), scene.local
     k = len(names)
-    nworld = _world(nlocal, parents)
+    nworld = _world(nlocal, parents, scene.no_parent_scale)
     notes = []
     all_meshes = [m for m in scene.meshes]
     if not all_meshes:
@@ -397,6 +412,17 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
     jparents = []
     for n in jn:
         jparents.append(next((jpos[a] for a in _ancestors(parents, n) if a in jpos), -1))
+    # A joint that does not inherit its parent joint's scale (FBX segment scale compensation)
+    # cannot be a UsdSkel child of a scaled joint: its local transform would shear.  Its world
+    # transform has no shear, so it hangs from the parent joint's own parent instead.
+    scaled = _scaled_nodes(scene, nlocal)
+    for q, n in enumerate(jn):
+        p = jparents[q]
+        if p < 0:
+            continue
+        chain = [n] + [a for a in _ancestors(parents, n)[:_ancestors(parents, n).index(jn[p])]]
+        if any(c in scene.no_parent_scale and scene.no_parent_scale[c] in scaled for c in chain):
+            jparents[q] = jparents[p]
     jnames = [names[n] for n in jn]
     # bones without a node: unanimated root joints at their bind pose
     ghost = {}
@@ -543,6 +569,7 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
     sub_of = {n: q for q, n in enumerate(sub)}
     sub_parents = np.array([sub_of.get(int(parents[n]), -1) for n in sub], dtype=np.int64)
     jsub = np.array([sub_of[n] for n in jn], dtype=np.int64)
+    sub_rrs = {sub_of[c]: sub_of[sn] for c, sn in scene.no_parent_scale.items() if c in sub_of and sn in sub_of}
     clips, clip_info, taken = [], [], set()
     for ai, (a, keys) in enumerate(zip(scene.animations, keyed)):
         name = _clip_name(a.name, ai, taken)
@@ -556,7 +583,7 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
         seconds = frames / rate
         chans = [c for c in a.channels if len(c.times) and need[c.node]]
         jl = _joint_locals(seconds, chans, nlocal, static_t, static_q, static_s, sub, sub_of, sub_parents,
-                           jsub, jparents, len(ghost), rest)
+                           jsub, jparents, len(ghost), rest, sub_rrs)
         interp = sorted({c.interpolation for c in a.channels if len(c.times) and not c.static})
         off_keys = keys[_off_grid(keys, rate)]
         info = {"name": name, "source_name": a.name, "source_keys": int(len(keys)),
@@ -567,7 +594,7 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
                             + ("" if not len(off_keys) else f" ({len(off_keys)} of {len(keys)} keys between frames)"))
         if len(off_keys):
             jl_keys = _joint_locals(off_keys, chans, nlocal, static_t, static_q, static_s, sub, sub_of,
-                                    sub_parents, jsub, jparents, len(ghost), rest)
+                                    sub_parents, jsub, jparents, len(ghost), rest, sub_rrs)
             info["error_bound"] = _resampling_bound(frames, rate, jl, off_keys, jl_keys, jparents, bind,
                                                     positions, ji, jw)
         clips.append(Clip(name, frames, jl))
@@ -589,6 +616,23 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
         geom_bind=np.eye(4), clips=tuple(clips), time_codes_per_second=rate, source=src)
 
 
+def _scaled_nodes(scene, nlocal) -> set:
+    """Nodes whose scale is not 1 at rest or in some animation (what segment scale compensation
+    has to undo)."""
+    out = set()
+    if not scene.no_parent_scale:
+        return out
+    wanted = set(scene.no_parent_scale.values())
+    for n in wanted:
+        if not np.allclose(np.linalg.norm(nlocal[n, :3, :3], axis=0), 1.0, atol=1e-9):
+            out.add(n)
+    for a in scene.animations:
+        for c in a.channels:
+            if c.path == "s" and c.node in wanted and not np.allclose(c.values, 1.0, atol=1e-9):
+                out.add(c.node)
+    return out
+
+
 def _clip_name(raw, index, taken):
     """A clip's name: FBX ``Armature|walk`` becomes ``walk``; unnamed: ``animation_<index>``."""
     from .common import clip_name
@@ -597,7 +641,7 @@ def _clip_name(raw, index, taken):
 
 
 def _joint_locals(seconds, chans, nlocal, static_t, static_q, static_s, sub, sub_of, sub_parents, jsub,
-                  jparents, n_ghost, rest):
+                  jparents, n_ghost, rest, sub_rrs=None):
     """(f, b, 4, 4) joint-local transforms at ``seconds``: node locals sampled, composed to world,
     made relative to each joint's parent joint (ghost joints hold their rest)."""
     f = len(seconds)
@@ -611,7 +655,7 @@ def _joint_locals(seconds, chans, nlocal, static_t, static_q, static_s, sub, sub
         r = sample_channel(paths["r"], seconds) if "r" in paths else np.repeat(static_q[node][None], f, 0)
         s = sample_channel(paths["s"], seconds) if "s" in paths else np.repeat(static_s[node][None], f, 0)
         loc[:, q] = compose_trs(t, r, s)
-    world = _world(loc, sub_parents)
+    world = _world(loc, sub_parents, sub_rrs)
     jw_ = world[:, jsub]
     b = len(jsub) + n_ghost
     out = np.empty((f, b, 4, 4))

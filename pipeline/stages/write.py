@@ -77,8 +77,10 @@ def check_output_path(out_path) -> str:
 
 
 def root_scale(mesh: SkinnedMesh) -> float:
-    """The constant uniform scale ``k`` every root joint carries in the bind pose, the rest pose
-    and on every frame of every clip (an armature object's scale, a unit conversion), or 1.0.
+    """The uniform scale ``k`` the root joints carry (an armature object's scale, a unit
+    conversion): the median of their axis scales in the bind pose, the rest pose and on every
+    frame of every clip, or 1.0.  Dividing it out is exact; what remains of the roots' scales
+    (1 where the roots carried only ``k``) goes into the animation.
 
     The writer moves it onto the Skeleton prim (``xformOp:scale``, double precision), out of the
     SkelAnimation's ``half3`` scales, where it would be rounded (``half(0.01) / 0.01 = 1 + 2.1e-4``).
@@ -90,9 +92,9 @@ def root_scale(mesh: SkinnedMesh) -> float:
                                                                          for c in mesh.clips]
     _, _, s = decompose_trs(np.concatenate(mats))
     k = float(np.median(s))
-    # float32 sources give the "same" scale to ~1e-7; what is left after dividing by k rounds to
-    # exactly 1 in half precision
-    if not (np.isfinite(k) and k > 0) or np.max(np.abs(s - k)) > 1e-6 * k or abs(k - 1.0) < 1e-12:
+    # float32 sources give the "same" scale to ~1e-7: what is left after dividing by k then rounds
+    # to exactly 1 in half precision
+    if not (np.isfinite(k) and k > 0) or abs(k - 1.0) < 1e-12:
         return 1.0
     return k
 
