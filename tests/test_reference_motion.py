@@ -379,9 +379,6 @@ XFAIL = {
                                       "themselves; UsdSkel has no exact representation (FINDINGS F2, second part)",
     "realworld/playcanvas_lumberjack.glb": "3.8e-4 x size at on-grid keys (120 fps): Rigify DEF stretch scales (0.97..1.03) "
                                            "rounded to half3 (FINDINGS F2, second part)",
-    "realworld/ufbx_maya_game_sausage_7500_binary_combined.fbx": "deform 0.29 x size: Maya's segment scale compensation "
-                                                                 "(InheritType 2) is not applied to assimp's node tree "
-                                                                 "(FINDINGS F6); wiggle and spin match",
 }
 
 
