@@ -308,3 +308,20 @@ def test_files_fine_to_refuse_are_refused_in_one_line(tmp_path, rel, needle):
     assert len(err.splitlines()) == 1 and "Traceback" not in err and "internal error" not in err
     assert needle in err and src.name in err
     assert not out.exists() and not [f for f in os.listdir(tmp_path) if f.startswith(".colossus-")]
+
+
+def test_collada_polygons_skin_and_clips_come_from_the_file(imported):
+    """library_animation_clips.dae (Blender 2.6 <polygons>): assimp gives each vertex the weights
+    of the Collada vertex before it; the reader uses the file's <vertex_weights> (Collada vertex
+    0 is weighted 1 to the joint `Bone`, node id-bone-3) and the clips' own names and windows
+    (`bend` 0.0417..0.625 s, `turn` 0..0.8333 s at 24 fps)."""
+    import validators
+    from pipeline.readers import read
+
+    m = read(corpus_file("assimp/library_animation_clips.dae"))
+    assert m.joint_names[m.joint_indices[0, 0]] == "id-bone-3" and m.joint_weights[0, 0] == 1.0
+    assert all(m.joint_weights.sum(axis=1) > 0)  # assimp left vertex 0 without weight
+    assert [(c.name, c.times[0], c.times[-1]) for c in m.clips] == [("bend", 1.0, 15.0), ("turn", 0.0, 20.0)]
+    assert any("<vertex_weights>" in n for n in m.source["notes"])
+    res, out = imported("assimp/library_animation_clips.dae")
+    assert validators.check_asset(str(out)).passed

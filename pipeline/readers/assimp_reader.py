@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import InputError
 from .common import AllocationBudget, check_finite, check_input_file
 from .fbx_header import read_anim_stacks, read_global_settings, read_inherit_types, read_morph_geometry
+from .collada_xml import read_clips, read_skins
 from .scene import Animation, Channel, Scene, SceneMesh, Skin, build
 
 FBX_HELPER = "_$AssimpFbx$_"
@@ -98,6 +99,7 @@ def read_scene(path, budget, fbx) -> Scene:
     if scene is None or scene.root_node is None:
         raise InputError(path, "assimp returned no scene (empty or unsupported file)")
 
+    notes = []
     names, nparents, nlocal, nmeshes = _flatten(scene.root_node)
     check_finite(path, "node transforms", nlocal.reshape(len(names), 16))
     index_of = {}
@@ -112,6 +114,8 @@ def read_scene(path, budget, fbx) -> Scene:
             mesh_node.setdefault(mi, ni)
 
     morph = read_morph_geometry(path) if ext == ".fbx" else {}
+    collada = read_skins(path) if ext == ".dae" else {}
+    mended = []
     meshes = []
     for mi, m in enumerate(scene.meshes):
         nv = m.num_vertices
@@ -151,13 +155,19 @@ def read_scene(path, budget, fbx) -> Scene:
                 ww.append(w)
             skin = Skin(np.array(joints, dtype=np.int64), np.array(ibms), bnames,
                         np.concatenate(vv), np.concatenate(jj), np.concatenate(ww))
+            if m.name in collada:
+                fixed = _collada_influences(collada[m.name], skin, nv)
+                if fixed is not None:
+                    skin = fixed
+                    mended.append(m.name)
         meshes.append(SceneMesh(name=m.name, node=node, positions=v, triangles=tri, to_world=to_world,
                                 skin=skin, morph_targets=morph.get(m.name, 0) or morph.get(names[node] if node >= 0 else "", 0)))
 
     hint = _fbx_rate(fbx) if ext == ".fbx" else None
     stacks = read_anim_stacks(path) if ext == ".fbx" else {}
+    dae_clips = read_clips(path) if ext == ".dae" else []
     anims = []
-    for a in scene.animations:
+    for ai, a in enumerate(scene.animations):
         tps = float(a.ticks_per_second or 0.0) or hint or 25.0
         span = stacks.get(a.name)
         shift = span[0] if span else 0.0  # assimp starts each FBX stack at 0: back to scene time
@@ -187,13 +197,59 @@ def read_scene(path, budget, fbx) -> Scene:
                         raise InputError(path, f"animation {a.name!r}, node {ch.node_name!r}: a zero rotation quaternion")
                     v = v / nrm[:, None]
                 chans.append(Channel(node, path_, t / tps + shift, v, "LINEAR"))
-        anims.append(Animation(a.name, chans, span))
+        name = a.name
+        if dae_clips and len(dae_clips) == len(scene.animations) and a.name == f"combinedAnim_{ai}":
+            # assimp's name for the i-th <animation_clip>: the file's name and window instead
+            name, lo, hi = dae_clips[ai]
+            if np.isfinite(hi) and hi >= lo:
+                span = (lo, hi)
+        anims.append(Animation(name, chans, span))
     helpers = {i for i, n in enumerate(names) if FBX_HELPER in n}
+    if mended:
+        notes.append(f"assimp's skin weights of {', '.join(mended)} did not follow the file's <vertex_weights> "
+                     "(a known assimp error on Collada <polygons>): the file's own weights were used")
     rrs = _segment_scale_nodes(names, nparents, read_inherit_types(path)) if ext == ".fbx" else {}
     return Scene(names=[n.split(FBX_HELPER)[0] for n in names], parents=nparents, local=nlocal, meshes=meshes,
+                 notes=notes,
                  animations=anims, helpers=helpers, fps_hint=hint, unweighted_follow_node=True,
                  no_parent_scale=rrs,
                  sampling_note="keys as assimp bakes them, lerp / slerp between")
+
+
+def _collada_influences(entry, skin, nv):
+    """``skin`` with the influences the Collada file itself gives each of assimp's vertices (one
+    per corner, in document order), when they differ from assimp's; None when they agree or
+    cannot be mapped (corner count, a joint assimp has no bone for)."""
+    corners = entry["corners"]
+    if len(corners) != nv or (len(corners) and (corners.min() < 0 or corners.max() >= entry["vertices"])):
+        return None
+    bone_of = {}
+    for j, cands in enumerate(entry["joints"]):
+        hit = next((b for b, name in enumerate(skin.names) if name in cands), None)
+        if hit is not None:
+            bone_of[j] = hit
+    live = entry["weight"] > 0
+    if any(int(j) not in bone_of for j in np.unique(entry["joint"][live])):
+        return None
+    # file influences of each Collada vertex, then of each corner
+    order = np.argsort(entry["vertex"], kind="stable")
+    xv, xj, xw = entry["vertex"][order], entry["joint"][order], entry["weight"][order]
+    start = np.searchsorted(xv, np.arange(entry["vertices"] + 1))
+    counts = np.diff(start)[corners]
+    corner = np.repeat(np.arange(nv), counts)
+    src = np.repeat(start[corners], counts) + (np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts))
+    lut = np.array([bone_of.get(j, -1) for j in range(len(entry["joints"]))], dtype=np.int64)
+    vj, jj, ww = corner, lut[xj[src]], xw[src]
+    keep = (ww > 0) & (jj >= 0)
+    vj, jj, ww = vj[keep], jj[keep], ww[keep]
+    nb = len(skin.names)
+    mine = np.zeros((nv, nb))
+    np.add.at(mine, (skin.vertex, skin.joint), skin.weight)
+    file_ = np.zeros((nv, nb))
+    np.add.at(file_, (vj, jj), ww)
+    if np.max(np.abs(mine - file_)) <= 1e-6:
+        return None
+    return Skin(skin.joints, skin.inverse_binds, skin.names, vj, jj, ww)
 
 
 def _segment_scale_nodes(names, parents, inherit) -> dict:

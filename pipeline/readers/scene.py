@@ -149,6 +149,8 @@ class Scene:
         The file's own declared frame rate (FBX header), tried first for the grid.
     sampling_note : str
         How the reader obtained the keys (for the summary).
+    notes : list of str
+        The reader's own findings, for the import's warnings.
     """
 
     names: list
@@ -161,6 +163,7 @@ class Scene:
     sampling_note: str = ""
     unweighted_follow_node: bool = False
     no_parent_scale: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
 
 
 # ------------------------------------------------------------------------------ sampling
@@ -286,7 +289,7 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
     names, parents, nlocal = scene.names, np.asarray(scene.parents, dtype=np.int64), scene.local
     k = len(names)
     nworld = _world(nlocal, parents, scene.no_parent_scale)
-    notes = []
+    notes = list(scene.notes)
     all_meshes = [m for m in scene.meshes]
     if not all_meshes:
         raise InputError(path, "the scene has no mesh")
