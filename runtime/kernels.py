@@ -31,9 +31,14 @@ def _bracket(times, t):
 
 @njit(cache=True)
 def _slerp(q0, q1, a, out):
-    """GfSlerp of two (x, y, z, w) quaternions: shortest arc, linear when nearly parallel,
-    normalised."""
-    cos_t = q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]
+    """GfSlerp of two (x, y, z, w) quaternions exactly as usd-core interpolates ``quatf`` samples:
+    the cosine from the float components (GfQuatf's float dot), shortest arc, and on the linear
+    branch (``1 - cos <= 1e-5``) a plain lerp that is *not* renormalised (GfSlerp does not; the
+    SkelAnimation's consumers then build the joint matrix from that slightly short quaternion, so
+    this kernel does too, to show the same shape as UsdSkel)."""
+    f32 = np.float32
+    cos_t = np.float64(f32(f32(f32(f32(q0[0]) * f32(q1[0])) + f32(f32(q0[1]) * f32(q1[1]))) + f32(f32(q0[2]) * f32(q1[2])))
+                       + f32(f32(q0[3]) * f32(q1[3])))
     sign = 1.0
     if cos_t < 0.0:
         cos_t = -cos_t
@@ -47,14 +52,8 @@ def _slerp(q0, q1, a, out):
         s0 = 1.0 - a
         s1 = a
     s1 *= sign
-    n2 = 0.0
     for c in range(4):
         out[c] = s0 * q0[c] + s1 * q1[c]
-        n2 += out[c] * out[c]
-    if n2 > 0.0:  # Gf renormalises (it matters on the linear branch)
-        n = math.sqrt(n2)
-        for c in range(4):
-            out[c] /= n
 
 
 @njit(cache=True)

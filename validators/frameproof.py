@@ -225,7 +225,10 @@ def world_spheres(joint_xforms, part_joints, centers, radii):
     m = np.asarray(joint_xforms, dtype=np.float64)[:, np.asarray(part_joints)]  # (f, P, 4, 4)
     c = np.asarray(centers, dtype=np.float64)
     wc = np.einsum("fpij,pj->fpi", m[..., :3, :3], c) + m[..., :3, 3]
-    scale = np.linalg.norm(m[..., :3, :3], ord=2, axis=(-2, -1)) * (1.0 + 1e-12)
+    a = m[..., :3, :3]
+    ok = np.all(np.isfinite(a), axis=(-2, -1))
+    scale = np.full(a.shape[:-2], np.nan)
+    scale[ok] = np.linalg.norm(a[ok], ord=2, axis=(-2, -1)) * (1.0 + 1e-12)  # NaN joints stay NaN
     return wc, scale * np.asarray(radii, dtype=np.float64), scale
 
 

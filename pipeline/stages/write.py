@@ -203,6 +203,10 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
             local = clip.local.copy()
             local[:, roots] = unscale @ local[:, roots]
             t, q, s = decompose_trs(local)
+            # one hemisphere along time: consumers slerp consecutive samples in float (GfSlerp on
+            # quatf), which is least exact for nearly opposite quaternions it has to flip
+            flip = np.cumsum(np.einsum("fjk,fjk->fj", q[:-1], q[1:]) < 0, axis=0) % 2 == 1
+            q[1:][flip] *= -1
             ta, ra, sa = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr(), anim.CreateScalesAttr()
             qxyzw = np.ascontiguousarray(q, dtype=np.float32)
             for f, code in enumerate(clip.times):
