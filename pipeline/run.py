@@ -203,13 +203,13 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None):
         return m, rep
 
     mesh = step(0, "read", do_read)
-    # clips rounded to what the asset stores (half-precision scales), so the spheres hold for it
-    mesh = step(1, "bake", lambda: (lambda r: (stored_clips(r[0]), r[1]))(bake(mesh, s.up_axis, s.meters_per_unit)))
+    mesh = step(1, "bake", lambda: bake(mesh, s.up_axis, s.meters_per_unit))
     mesh = step(2, "weld", lambda: weld(mesh))
     mesh = step(3, "orient", lambda: orient(mesh))
     mesh = step(4, "bind", lambda: bind(mesh, s.max_influences, s.unweighted))
     mesh = step(5, "parts", lambda: parts(mesh, s.parts, s.min_part_faces, s.parts_threshold))
-    mesh = step(6, "spheres", lambda: spheres(mesh))
+    # on the clips as the asset stores them (half-precision scales), so the spheres hold for it
+    mesh = step(6, "spheres", lambda: spheres(stored_clips(mesh)))
     return mesh, reports
 
 

@@ -59,6 +59,9 @@ def pack_influences(n: int, vertex: np.ndarray, joint: np.ndarray, weight: np.nd
     weight = np.asarray(weight, dtype=np.float64)
     keep = weight > 0
     vertex, joint, weight = vertex[keep], joint[keep], weight[keep]
+    fast = _pack_sorted(n, vertex, joint, weight)
+    if fast is not None:
+        return fast
     # Merge duplicate (vertex, joint) entries by summing.
     if len(vertex):
         key = vertex * (int(joint.max()) + 1) + joint
@@ -78,6 +81,35 @@ def pack_influences(n: int, vertex: np.ndarray, joint: np.ndarray, weight: np.nd
     ji[vertex, slot] = joint
     jw[vertex, slot] = weight
     return ji, jw
+
+
+def _pack_sorted(n, vertex, joint, weight):
+    """:func:`pack_influences` for the common case of entries grouped by vertex (a glTF
+    ``JOINTS_0``/``WEIGHTS_0`` set, assimp's per-vertex weights): a few row sorts instead of
+    sorting every entry.  None when the entries are not grouped or a vertex names a joint twice
+    (the general path merges those)."""
+    if not len(vertex):
+        return None
+    if np.any(np.diff(vertex) < 0):
+        return None
+    counts = np.bincount(vertex, minlength=n)
+    k = max(1, int(counts.max()))
+    starts = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(counts, out=starts[1:])
+    slot = np.arange(len(vertex)) - starts[vertex]
+    ji = np.full((n, k), -1, dtype=np.int64)
+    jw = np.zeros((n, k), dtype=np.float64)
+    ji[vertex, slot] = joint
+    jw[vertex, slot] = weight
+    if k > 1:
+        sj = np.sort(ji, axis=1)
+        if np.any((sj[:, 1:] == sj[:, :-1]) & (sj[:, 1:] >= 0)):
+            return None
+        order = np.argsort(-jw, axis=1, kind="stable")
+        ji = np.take_along_axis(ji, order, axis=1)
+        jw = np.take_along_axis(jw, order, axis=1)
+    ji[ji < 0] = 0
+    return ji.astype(np.int32), jw.astype(np.float32)
 
 
 def clip_name(raw: str, taken: set) -> str:

@@ -167,37 +167,45 @@ class Scene:
 
 
 # ------------------------------------------------------------------------------ sampling
-def sample_channel(ch: Channel, seconds: np.ndarray) -> np.ndarray:
+def sample_channel(ch: Channel, seconds: np.ndarray, key_tolerance: float = 0.0) -> np.ndarray:
     """The channel's value at ``seconds`` (clamped to its first and last key), with its own
-    interpolation.  Returns ``(f, c)`` float64; rotations are unit quaternions (x, y, z, w)."""
+    interpolation.  Returns ``(f, c)`` float64; rotations are unit quaternions (x, y, z, w).
+
+    A sample within ``key_tolerance`` seconds of a key takes that key's value exactly (no
+    interpolation round-off; a file's float32 key times are never bit-equal to ``frame / fps``)."""
     t = np.asarray(ch.times, dtype=np.float64)
     v = np.asarray(ch.values, dtype=np.float64)
     cubic = ch.interpolation == "CUBICSPLINE"
     vals = v[:, 1] if cubic else v
+    seconds = np.asarray(seconds, dtype=np.float64)
     if len(t) == 1:
         return np.repeat(vals[:1], len(seconds), axis=0)
-    i = np.clip(np.searchsorted(t, seconds, side="right") - 1, 0, len(t) - 2)
+    j = np.minimum(np.searchsorted(t, seconds - key_tolerance), len(t) - 1)
+    on = np.abs(t[j] - seconds) <= key_tolerance
+    if np.all(on):
+        return vals[j]
+    out = np.empty((len(seconds), vals.shape[1]))
+    out[on] = vals[j[on]]
+    x = seconds[~on]
+    i = np.clip(np.searchsorted(t, x, side="right") - 1, 0, len(t) - 2)
     t0, t1 = t[i], t[i + 1]
     dt = np.where(t1 > t0, t1 - t0, 1.0)
-    u = np.clip((seconds - t0) / dt, 0.0, 1.0)
+    u = np.clip((x - t0) / dt, 0.0, 1.0)
     if ch.interpolation == "STEP":
-        out = np.where((u >= 1.0)[:, None], vals[i + 1], vals[i])
+        res = np.where((u >= 1.0)[:, None], vals[i + 1], vals[i])
     elif cubic:  # glTF 2.0 spec, Appendix C: Hermite spline with tangents scaled by the key interval
         u2, u3 = u * u, u * u * u
         h00, h10 = 2 * u3 - 3 * u2 + 1, u3 - 2 * u2 + u
         h01, h11 = -2 * u3 + 3 * u2, u3 - u2
-        out = (h00[:, None] * v[i, 1] + (h10 * dt)[:, None] * v[i, 2]
+        res = (h00[:, None] * v[i, 1] + (h10 * dt)[:, None] * v[i, 2]
                + h01[:, None] * v[i + 1, 1] + (h11 * dt)[:, None] * v[i + 1, 0])
         if ch.path == "r":
-            out = out / np.linalg.norm(out, axis=1, keepdims=True)
+            res = res / np.linalg.norm(res, axis=1, keepdims=True)
     elif ch.path == "r":
-        out = slerp(vals[i], vals[i + 1], u)
+        res = slerp(vals[i], vals[i + 1], u)
     else:
-        out = vals[i] + (vals[i + 1] - vals[i]) * u[:, None]
-    # keys sampled exactly at their own time keep their exact value (no lerp round-off)
-    exact = np.isin(seconds, t)
-    if np.any(exact):
-        out[exact] = vals[np.searchsorted(t, seconds[exact])]
+        res = vals[i] + (vals[i + 1] - vals[i]) * u[:, None]
+    out[~on] = res
     return out
 
 
@@ -359,7 +367,7 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
         s = all_meshes[i].skin
         if s is None:
             continue
-        live = np.unique(s.joint[s.weight > 0])
+        live = np.flatnonzero(np.bincount(s.joint[s.weight > 0], minlength=len(s.joints)))
         for j in live:
             if s.joints[j] >= 0:
                 used_bones.add(int(s.joints[j]))
@@ -510,14 +518,15 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
             # the skin's own bind pose put into the skeleton's: G = bind_j @ inverse_bind_j (one per
             # joint; they agree when the skin was bound in the skeleton's bind pose)
             g_all = bind[sj_of] @ s.inverse_binds
-            live = np.unique(s.joint[s.weight > 0])
+            live = np.flatnonzero(np.bincount(s.joint[s.weight > 0], minlength=len(s.joints)))
             g = g_all[live[0]] if len(live) else m.to_world
             if len(live) > 1:
-                ref = model_scale(p) or 1.0
-                spread = float(np.max(np.abs(g_all[live] - g)[:, :3, :]
-                                      * np.r_[np.ones(3), 1.0 / ref][None, None, :]))
-                bind_spread = max(bind_spread, spread)
-            q = p @ g[:3, :3].T + g[:3, 3]
+                diff = np.abs(g_all[live] - g)[:, :3, :]
+                if diff.max() > 1e-12:
+                    ref = model_scale(p) or 1.0
+                    spread = float(np.max(diff * np.r_[np.ones(3), 1.0 / ref][None, None, :]))
+                    bind_spread = max(bind_spread, spread)
+            q = p if np.allclose(g, np.eye(4), rtol=0, atol=1e-12) else p @ g[:3, :3].T + g[:3, 3]
             vj.append(s.vertex + base)
             jj.append(sj_of[s.joint])
             ww.append(s.weight)
@@ -586,7 +595,7 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
         seconds = frames / rate
         chans = [c for c in a.channels if len(c.times) and need[c.node]]
         jl = _joint_locals(seconds, chans, nlocal, static_t, static_q, static_s, sub, sub_of, sub_parents,
-                           jsub, jparents, len(ghost), rest, sub_rrs)
+                           jsub, jparents, len(ghost), rest, sub_rrs, GRID_KEY_FRAMES / rate)
         interp = sorted({c.interpolation for c in a.channels if len(c.times) and not c.static})
         off_keys = keys[_off_grid(keys, rate)]
         info = {"name": name, "source_name": a.name, "source_keys": int(len(keys)),
@@ -597,7 +606,7 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
                             + ("" if not len(off_keys) else f" ({len(off_keys)} of {len(keys)} keys between frames)"))
         if len(off_keys):
             jl_keys = _joint_locals(off_keys, chans, nlocal, static_t, static_q, static_s, sub, sub_of,
-                                    sub_parents, jsub, jparents, len(ghost), rest, sub_rrs)
+                                    sub_parents, jsub, jparents, len(ghost), rest, sub_rrs, GRID_KEY_FRAMES / rate)
             info["error_bound"] = _resampling_bound(frames, rate, jl, off_keys, jl_keys, jparents, bind,
                                                     positions, ji, jw)
         clips.append(Clip(name, frames, jl))
@@ -644,7 +653,7 @@ def _clip_name(raw, index, taken):
 
 
 def _joint_locals(seconds, chans, nlocal, static_t, static_q, static_s, sub, sub_of, sub_parents, jsub,
-                  jparents, n_ghost, rest, sub_rrs=None):
+                  jparents, n_ghost, rest, sub_rrs=None, key_tol=0.0):
     """(f, b, 4, 4) joint-local transforms at ``seconds``: node locals sampled, composed to world,
     made relative to each joint's parent joint (ghost joints hold their rest)."""
     f = len(seconds)
@@ -652,19 +661,27 @@ def _joint_locals(seconds, chans, nlocal, static_t, static_q, static_s, sub, sub
     by_node = {}
     for c in chans:
         by_node.setdefault(c.node, {})[c.path] = c
-    for node, paths in by_node.items():
-        q = sub_of[node]
-        t = sample_channel(paths["t"], seconds) if "t" in paths else np.repeat(static_t[node][None], f, 0)
-        r = sample_channel(paths["r"], seconds) if "r" in paths else np.repeat(static_q[node][None], f, 0)
-        s = sample_channel(paths["s"], seconds) if "s" in paths else np.repeat(static_s[node][None], f, 0)
-        loc[:, q] = compose_trs(t, r, s)
+    if by_node:  # every animated node's TRS sampled, then composed in one call
+        nodes = list(by_node)
+        T = np.empty((f, len(nodes), 3))
+        R = np.empty((f, len(nodes), 4))
+        S = np.empty((f, len(nodes), 3))
+        for x, node in enumerate(nodes):
+            paths = by_node[node]
+            T[:, x] = sample_channel(paths["t"], seconds, key_tol) if "t" in paths else static_t[node]
+            R[:, x] = sample_channel(paths["r"], seconds, key_tol) if "r" in paths else static_q[node]
+            S[:, x] = sample_channel(paths["s"], seconds, key_tol) if "s" in paths else static_s[node]
+        loc[:, [sub_of[n] for n in nodes]] = compose_trs(T, R, S)
     world = _world(loc, sub_parents, sub_rrs)
     jw_ = world[:, jsub]
     b = len(jsub) + n_ghost
     out = np.empty((f, b, 4, 4))
-    for q in range(len(jsub)):
-        p = jparents[q]
-        out[:, q] = jw_[:, q] if p < 0 else np.linalg.solve(jw_[:, p], jw_[:, q])
+    nb = len(jsub)
+    par = np.asarray(jparents[:nb])
+    out[:, :nb] = jw_
+    kids = np.flatnonzero(par >= 0)
+    if len(kids):
+        out[:, kids] = np.linalg.solve(jw_[:, par[kids]], jw_[:, kids])
     for q in range(len(jsub), b):
         out[:, q] = rest[q]
     return out
