@@ -97,6 +97,5 @@ def apply_points(m: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 
 def uniform_scale(m: np.ndarray) -> np.ndarray:
-    """Largest stretch (singular value) of (..., 4, 4) transforms: what a sphere radius is
-    multiplied by (the largest axis scale when there is no shear)."""
-    return np.linalg.norm(np.asarray(m, dtype=np.float64)[..., :3, :3], ord=2, axis=(-2, -1))
+    """Largest axis scale of (..., 4, 4) transforms (what a sphere radius is multiplied by)."""
+    return np.max(np.linalg.norm(np.asarray(m)[..., :3, :3], axis=-2), axis=-1)

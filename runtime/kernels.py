@@ -237,33 +237,6 @@ def _prepare_part(p, skinned, rest, joint_indices, joint_weights, skin,
     _chunk_spheres(p, points, triangles, faces, chunk_offsets, part_chunks, chunk_sph)
 
 
-@njit(cache=True, inline="always")
-def _max_stretch(m):
-    """Largest singular value of the 3x3 block of ``m`` (the most any direction is stretched:
-    a sphere's radius multiplier that stays sound when the transform shears), from the largest
-    eigenvalue of the symmetric ``A = M^T M`` in closed form (Smith 1961)."""
-    a00 = m[0, 0] * m[0, 0] + m[1, 0] * m[1, 0] + m[2, 0] * m[2, 0]
-    a11 = m[0, 1] * m[0, 1] + m[1, 1] * m[1, 1] + m[2, 1] * m[2, 1]
-    a22 = m[0, 2] * m[0, 2] + m[1, 2] * m[1, 2] + m[2, 2] * m[2, 2]
-    a01 = m[0, 0] * m[0, 1] + m[1, 0] * m[1, 1] + m[2, 0] * m[2, 1]
-    a02 = m[0, 0] * m[0, 2] + m[1, 0] * m[1, 2] + m[2, 0] * m[2, 2]
-    a12 = m[0, 1] * m[0, 2] + m[1, 1] * m[1, 2] + m[2, 1] * m[2, 2]
-    p1 = a01 * a01 + a02 * a02 + a12 * a12
-    q = (a00 + a11 + a22) / 3.0
-    p2 = (a00 - q) ** 2 + (a11 - q) ** 2 + (a22 - q) ** 2 + 2.0 * p1
-    if p2 <= 1e-30 * (q * q + 1e-300):
-        top = max(a00, max(a11, a22))
-    else:
-        pp = math.sqrt(p2 / 6.0)
-        b00, b11, b22 = (a00 - q) / pp, (a11 - q) / pp, (a22 - q) / pp
-        b01, b02, b12 = a01 / pp, a02 / pp, a12 / pp
-        r = 0.5 * (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02))
-        r = min(1.0, max(-1.0, r))
-        top = q + 2.0 * pp * math.cos(math.acos(r) / 3.0)
-        top = max(top, max(a00, max(a11, a22)))  # never below a column norm
-    return math.sqrt(max(top, 0.0)) * (1.0 + 1e-12)
-
-
 @njit(cache=True)
 def _part_spheres(centers, radii, part_joint, world, points, vert_offsets, verts, spheres, cull,
                   exact):
@@ -271,7 +244,7 @@ def _part_spheres(centers, radii, part_joint, world, points, vert_offsets, verts
 
     centers (P, 3) joint space, radii (P,), part_joint (P,), world (J, 4, 4) joint-to-stage,
     points (V, 3) posed, vert_offsets (P+1,) / verts: CSR of each part's vertices.
-    spheres (P, 4) out: centre + radius scaled by the joint's largest stretch (singular value).
+    spheres (P, 4) out: centre + radius scaled by the joint's largest axis scale.
     cull (P, 4) out (only if ``exact``, from skinned ``points``): same centre, radius =
     max(sphere radius, farthest posed part vertex), so culling against it can never drop a
     triangle even if the asset sphere does not hold."""
@@ -282,7 +255,12 @@ def _part_spheres(centers, radii, part_joint, world, points, vert_offsets, verts
         x = cx * m[0, 0] + cy * m[1, 0] + cz * m[2, 0] + m[3, 0]
         y = cx * m[0, 1] + cy * m[1, 1] + cz * m[2, 1] + m[3, 1]
         z = cx * m[0, 2] + cy * m[1, 2] + cz * m[2, 2] + m[3, 2]
-        rad = radii[p] * _max_stretch(m)
+        s = 0.0
+        for r in range(3):
+            n = math.sqrt(m[r, 0] * m[r, 0] + m[r, 1] * m[r, 1] + m[r, 2] * m[r, 2])
+            if n > s:
+                s = n
+        rad = radii[p] * s
         spheres[p, 0] = x
         spheres[p, 1] = y
         spheres[p, 2] = z

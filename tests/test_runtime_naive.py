@@ -126,25 +126,3 @@ def test_raycast_reference_on_a_square():
     assert list(tri) == [0, 1, -1]
     assert np.allclose(bary[0] @ pts[tris[0]], [0.75, 0.25, 0])
 
-
-def test_max_stretch_is_the_largest_singular_value():
-    """The part-sphere radius multiplier: sheared, scaled, rotated, diagonal and degenerate 3x3s
-    against numpy's spectral norm (the largest axis scale is too small under shear)."""
-    from scipy.spatial.transform import Rotation
-
-    from runtime.kernels import _max_stretch
-
-    rng = np.random.default_rng(7)
-    mats = [np.eye(4), np.diag([2.0, 2.0, 2.0, 1.0]), np.diag([1.0, 3.0, 0.5, 1.0]), np.zeros((4, 4))]
-    for _ in range(200):
-        m = np.eye(4)
-        r = Rotation.from_rotvec(rng.normal(size=3)).as_matrix()
-        m[:3, :3] = r @ np.diag(rng.uniform(0.5, 1.5, 3)) @ Rotation.from_rotvec(rng.normal(size=3)).as_matrix()
-        m[:3, 3] = rng.normal(size=3)
-        mats.append(m)
-    for m in mats:
-        want = np.linalg.norm(m[:3, :3], ord=2)
-        got = _max_stretch(np.ascontiguousarray(m.T))  # the kernels take the row-vector layout
-        assert want <= got <= want * (1 + 1e-9) + 1e-300, (m, want, got)
-        cols = np.linalg.norm(m[:3, :3], axis=0).max()
-        assert got >= cols * (1 - 1e-12)

@@ -383,6 +383,32 @@ def test_spheres_contain_every_frame(mode):
     assert rep.counts["max_slack_ratio"] == pytest.approx(max(d["slack_ratio"] for d in rep.details["parts"]))
 
 
+def test_spheres_hold_under_a_sheared_joint():
+    """A parent's non-uniform stretch under a rotated child shears the child's transform: its
+    sphere, moved by the joint and scaled by the largest axis scale (the contract's rule), must
+    still hold every vertex (mannequiny's stretched thighs made COL403 fail)."""
+    from pipeline.model import Clip
+
+    mesh = synth.make_tube(frames=6)
+    bend = mesh.clip("bend").local.copy()
+    for f in range(len(bend)):
+        bend[f, 1] = bend[f, 1] @ np.diag([1.0, 1.0 + 0.3 * f / 5, 1.0, 1.0])  # mid stretches along y
+        bend[f, 2] = bend[f, 2] @ synth.rot("z", 0.8)                            # tip turned under it
+    mesh = mesh.replace(clips=(Clip("bend", mesh.clip("bend").times, bend),))
+    out, _ = spheres(parts(mesh)[0])
+    S = naive.all_poses(out)
+    skinned = skin_points_ref(out, S)
+    lin = S[..., :3, :3]
+    assert np.any(np.linalg.norm(lin, ord=2, axis=(-2, -1)) > np.linalg.norm(lin, axis=-2).max(-1) * (1 + 1e-3))
+    P = out.parts
+    for p, j in enumerate(P.joints):
+        verts = np.unique(out.triangles[P.part_faces(p)])
+        c = np.einsum("fij,j->fi", S[:, j, :3, :3], P.centers[p].astype(np.float64)) + S[:, j, :3, 3]
+        r = float(P.radii[p]) * np.linalg.norm(lin[:, j], axis=-2).max(-1)  # the contract's radius
+        d = np.linalg.norm(skinned[:, verts] - c[:, None], axis=2)
+        assert np.all(d <= r[:, None] * (1 + 1e-6)), (p, (d - r[:, None]).max())
+
+
 def naive_min_sphere_check(points):
     """Minimal sphere of float64 points (the kernel itself, checked against brute force above)."""
     return min_sphere(np.asarray(points, dtype=np.float64))

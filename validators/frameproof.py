@@ -217,18 +217,12 @@ def world_spheres(joint_xforms, part_joints, centers, radii):
     Returns
     -------
     centers : (f, P, 3) float64, radii : (f, P) float64, scale : (f, P) float64
-        ``scale`` is the largest singular value of each part's joint transform (the radius
-        multiplier: a joint-space ball maps into the ball of that radius even when the joint's
-        transform shears, as it does under a parent's non-uniform scale; the largest axis scale
-        would be too small then).
+        ``scale`` is the largest axis scale of each part's joint transform (radius multiplier).
     """
     m = np.asarray(joint_xforms, dtype=np.float64)[:, np.asarray(part_joints)]  # (f, P, 4, 4)
     c = np.asarray(centers, dtype=np.float64)
     wc = np.einsum("fpij,pj->fpi", m[..., :3, :3], c) + m[..., :3, 3]
-    a = m[..., :3, :3]
-    ok = np.all(np.isfinite(a), axis=(-2, -1))
-    scale = np.full(a.shape[:-2], np.nan)
-    scale[ok] = np.linalg.norm(a[ok], ord=2, axis=(-2, -1)) * (1.0 + 1e-12)  # NaN joints stay NaN
+    scale = np.linalg.norm(m[..., :3, :3], axis=-2).max(-1)
     return wc, scale * np.asarray(radii, dtype=np.float64), scale
 
 

@@ -11,6 +11,11 @@ float32 array (one part at a time), and the sphere is their exact minimal enclos
 (:func:`pipeline.geometry.min_sphere`), padded by
 ``SPHERE_PAD_RELATIVE * model size + SPHERE_PAD_RADIUS * radius``.
 
+Where a pose shears the joint's transform (a parent's non-uniform scale under a rotated child),
+the radius is multiplied by the largest ratio, over the poses, of that transform's largest
+singular value to its largest axis scale: the contract moves a sphere by the joint transform and
+scales its radius by the largest axis scale, which alone would not cover the sheared ball.
+
 After the centre is rounded to float32, the radius is re-derived from the float64 distance of the
 float64 skinned points (recomputed by a second kernel, not the float32 copies) to that centre, so
 containment holds exactly for the stored values before the pad is added.
@@ -202,6 +207,14 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     _, ji_all, jw_all, _ = _check_skin_args(mesh.positions, mesh.joint_indices, mesh.joint_weights,
                                             to_skel[:1, :, :3, :])
 
+    # A joint-space ball moved by a sheared joint transform (a parent's non-uniform stretch under a
+    # rotated child) is an ellipsoid whose longest axis is the transform's largest singular
+    # value, more than its largest axis scale, the radius multiplier of the contract: the radius
+    # is widened by the largest ratio of the two over the poses (1 where no pose shears).
+    lin = S[..., :3, :3]
+    shear = np.maximum(np.linalg.norm(lin, ord=2, axis=(-2, -1)) / np.linalg.norm(lin, axis=-2).max(-1), 1.0)
+    shear = shear.max(axis=0) * (1.0 + 1e-12)  # (b,)
+
     slack_idx = slack_pose_indices(mesh)
     P = len(parts_in)
     centers = np.zeros((P, 3), np.float32)
@@ -220,7 +233,7 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
         c32 = center.astype(np.float32)
         c64 = c32.astype(np.float64)
         dmax = _max_distance(pos, ji, jw, mats, c64[0], c64[1], c64[2])
-        radius = max(r, dmax) + abs_pad + SPHERE_PAD_RADIUS * r
+        radius = max(r, dmax) * (shear[j] if shear[j] > 1.0 + 1e-9 else 1.0) + abs_pad + SPHERE_PAD_RADIUS * r
         r32 = _round_up_f32(radius)
         centers[p], radii[p] = c32, r32
         tight = float(frame_r.max())

@@ -28,7 +28,7 @@ def faces_in_parts(asset, ctx):
 def holds_in_bind_pose(asset, ctx):
     """What: with every joint at its bind transform, each vertex of each part's triangles lies in
     the part's sphere (centre moved by the joint's bind transform and the skeleton's
-    transform, radius scaled by its largest stretch, the singular value).
+    transform, radius scaled by its largest axis scale).
     Why: the cheapest proof that the spheres belong to this mesh at all.
     Example: sphere centres written in skeleton space instead of joint space."""
     poff, pverts = asset.part_vertices
