@@ -48,7 +48,8 @@ class _File:
 
     def __init__(self, path):
         self.path = path
-        data = open(path, "rb").read()
+        with open(path, "rb") as fh:
+            data = fh.read()
         bin_chunk = None
         if data[:4] == b"glTF":
             if len(data) < 20:
@@ -97,7 +98,8 @@ class _File:
                 from urllib.parse import unquote
                 ext_path = os.path.join(os.path.dirname(os.path.abspath(path)), unquote(uri))
                 try:
-                    raw = open(ext_path, "rb").read()
+                    with open(ext_path, "rb") as fh:
+                        raw = fh.read()
                 except OSError:
                     raise InputError(path, f"buffer {i}: external file {uri!r} cannot be read") from None
             if len(raw) < int(b.get("byteLength", 0)):
