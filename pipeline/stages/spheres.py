@@ -13,6 +13,11 @@ sphere is their exact minimal enclosing sphere (:func:`pipeline.geometry.min_sph
 After the centre is rounded to float32, the radius is re-derived from the float64 distance of the
 float64 skinned points to that centre, so containment holds exactly at every sampled pose.
 
+Where a pose shears the joint's transform (a parent's non-uniform scale under a rotated child),
+the radius is multiplied by the largest ratio, over the poses, of that transform's largest
+singular value to its largest axis scale: the contract moves a sphere by the joint transform and
+scales its radius by the largest axis scale, which alone would not cover the sheared ball.
+
 **Between frames.**  The asset's guarantee covers every time in ``[first, last]`` of every clip as
 UsdSkel interpolates it, which ``colossus validate`` certifies with
 :func:`runtime.certify.continuous`.  The same certificate runs here on the clips exactly as the
@@ -83,10 +88,15 @@ def slack_pose_indices(mesh: SkinnedMesh, per_clip: int = SLACK_FRAMES_PER_CLIP)
 GROWTH_DEPTH = 6
 
 
-def written_clip(clip, joint_count: int) -> ClipData:
+def written_clip(clip, joint_count: int, roots=None, k: float = 1.0) -> ClipData:
     """A pipeline clip as :class:`runtime.asset.ClipData`, rounded as ``stages.write`` stores it
-    (``decompose_trs``; translations and rotations float32, scales float16)."""
-    t, q, s = decompose_trs(clip.local)
+    (``decompose_trs``; translations and rotations float32, scales float16; the root joints
+    ``roots`` with the skeleton's common scale ``k`` taken out, :func:`pipeline.stages.write.root_scale`)."""
+    local = clip.local
+    if roots is not None and k != 1.0:
+        local = local.copy()
+        local[:, roots, :3, :] /= k
+    t, q, s = decompose_trs(local)
     times = np.asarray(clip.times, dtype=np.float64)
     f64 = (lambda a, dt: np.ascontiguousarray(np.asarray(a, dtype=dt).astype(np.float64)))
     return ClipData(clip.name, clip.name, times, f64(t, np.float32), times, f64(q, np.float32), times,
@@ -121,6 +131,14 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
         raise ValueError("spheres: expected a mesh with parts (run the parts stage first), got parts=None")
     parts_in = mesh.parts
     S, labels = pose_transforms(mesh)
+    # A joint-space ball moved by a sheared joint transform (a parent's non-uniform stretch under a
+    # rotated child) is an ellipsoid whose longest axis is the transform's largest singular
+    # value, more than its largest axis scale, the radius multiplier of the contract: radii (and
+    # the per-pose bounds) are widened by the largest ratio of the two over the poses (1 where no
+    # pose shears).
+    lin = S[..., :3, :3]
+    shear = np.maximum(np.linalg.norm(lin, ord=2, axis=(-2, -1)) / np.linalg.norm(lin, axis=-2).max(-1), 1.0)
+    shear = shear.max(axis=0) * (1.0 + 1e-12)  # (b,)
     to_skel = S @ np.linalg.inv(mesh.bind_transforms)[None] @ mesh.geom_bind  # (F, b, 4, 4)
     inv_S = np.linalg.inv(S)
     G = mesh.geom_bind
@@ -147,8 +165,9 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
         pts -= c32.astype(np.float64)
         d = np.sqrt(np.einsum("fvi,fvi->fv", pts, pts).max(1))
         del pts
-        pose_far[:, p] = d
-        centers[p], r_min[p] = c32, max(r, float(d.max()))
+        widen = shear[j] if shear[j] > 1.0 + 1e-9 else 1.0
+        pose_far[:, p] = d * widen
+        centers[p], r_min[p] = c32, max(r, float(d.max())) * widen
         details.append({"part": p, "joint": mesh.joint_names[j], "tight_radius": tight, "vertices": int(len(verts))})
 
     target = r_min * (1.0 + SPHERE_PAD_RADIUS) + abs_pad  # the padded minimal sphere of the samples
@@ -193,9 +212,16 @@ def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
     if not mesh.clips or P == 0:
         return need
     voff, verts = part_vertex_csr(mesh.triangles, parts_in.face_offsets, parts_in.faces, mesh.vertex_count)
-    rig = certify.Rig(mesh.positions, mesh.joint_indices, mesh.joint_weights, mesh.geom_bind, mesh.bind_transforms,
-                      mesh.rest_transforms, mesh.parents, np.asarray(parts_in.joints), centers.astype(np.float64),
-                      target, voff, verts)
+    # the rig exactly as the writer lays it out: the roots' common scale k on the Skeleton prim
+    from .write import root_scale
+    k = root_scale(mesh)
+    roots = mesh.parents < 0
+    unscale = np.diag([1.0 / k, 1.0 / k, 1.0 / k, 1.0])
+    rest = mesh.rest_transforms.copy()
+    rest[roots] = unscale @ rest[roots]
+    rig = certify.Rig(mesh.positions, mesh.joint_indices, mesh.joint_weights, unscale @ mesh.geom_bind,
+                      unscale @ mesh.bind_transforms, rest, mesh.parents, np.asarray(parts_in.joints),
+                      centers.astype(np.float64), target, voff, verts, world=np.diag([k, k, k, 1.0]))
     start = 1  # pose 0 is the bind pose
     for clip in mesh.clips:
         n = clip.frame_count
@@ -203,7 +229,8 @@ def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
         start += n
         if n < 2:
             continue
-        c = certify.continuous(rig, written_clip(clip, mesh.joint_count), clip.times, far, np.ones_like(far, bool),
-                               0.0, 0.0, rho=target, growth=True, max_depth=GROWTH_DEPTH, frame_bound_space="joint")
+        c = certify.continuous(rig, written_clip(clip, mesh.joint_count, roots, k), clip.times, far,
+                               np.ones_like(far, bool), 0.0, 0.0, rho=target, growth=True,
+                               max_depth=GROWTH_DEPTH, frame_bound_space="joint")
         need = np.maximum(need, np.max(np.where(np.isfinite(c.bound), c.bound, 0.0), axis=0))
     return need

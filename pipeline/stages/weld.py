@@ -5,6 +5,12 @@ maps that every per-vertex attribute goes through.  The weld key includes the sk
 two vertices at one position with different weights are genuinely different vertices (welding
 them would change the animated shape), so they are kept apart and reported, since such a seam
 tears open in animation.
+
+Two vertices that share a triangle are never merged, however close: split copies of one vertex
+never share a triangle, while a closed mesh may hold genuinely different vertices closer than the
+tolerance, joined by a real edge (metaball-made meshes do); merging them would collapse that edge
+and its faces.  (Bit-identical duplicates in one triangle are still merged: that triangle has no
+area either way.)
 """
 
 from __future__ import annotations
@@ -82,7 +88,7 @@ def _row_groups(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def weld_maps(positions: np.ndarray, joint_indices: np.ndarray, joint_weights: np.ndarray,
-              tolerance: float) -> tuple[np.ndarray, np.ndarray, int]:
+              tolerance: float, triangles: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Index maps that merge vertices closer than ``tolerance`` with the same skin influences.
 
     Two vertices are merged when they are within ``tolerance`` (Euclidean) of each other and
@@ -97,6 +103,8 @@ def weld_maps(positions: np.ndarray, joint_indices: np.ndarray, joint_weights: n
     joint_indices : (n, k) int
     joint_weights : (n, k) float
     tolerance : float, >= 0
+    triangles : (m, 3) int, optional
+        When given, two vertices of one triangle never end up merged (unless bit-identical).
 
     Returns
     -------
@@ -140,8 +148,16 @@ def weld_maps(positions: np.ndarray, joint_indices: np.ndarray, joint_weights: n
     a, b = cls_first[pairs[:, 0]], cls_first[pairs[:, 1]]
     same = np.all(cj[a] == cj[b], axis=1) & np.all(np.abs(cw[a] - cw[b]) <= WELD_WEIGHT, axis=1)
     good = pairs[same]
+    edges = None
+    if triangles is not None and len(good):
+        edges = _class_edges(np.asarray(triangles, dtype=np.int64), cls_of, nc)
+        good = good[~np.isin(good[:, 0] * nc + good[:, 1], edges)]  # pairs are (lo, hi)
     graph = coo_matrix((np.ones(len(good), np.int8), (good[:, 0], good[:, 1])), shape=(nc, nc))
     ncomp, comp_of_cls = connected_components(graph, directed=False)
+    if edges is not None and len(edges):
+        lo, hi = edges // nc, edges % nc
+        if np.any(comp_of_cls[lo] == comp_of_cls[hi]):  # merged through a chain of near vertices
+            ncomp, comp_of_cls = _greedy_components(nc, good, lo, hi)
     comp = comp_of_cls[cls_of]
 
     # 3. lowest original index per group, groups in original order (classes are numbered in
@@ -159,6 +175,49 @@ def weld_maps(positions: np.ndarray, joint_indices: np.ndarray, joint_weights: n
     apart = ra != rb
     conflicts = int(len(np.unique(np.concatenate([ra[apart], rb[apart]]))))
     return keep, inverse, conflicts
+
+
+def _class_edges(triangles, cls_of, nc):
+    """Sorted unique ``lo * nc + hi`` keys of the class pairs joined by a triangle edge."""
+    c = cls_of[triangles]
+    e = np.concatenate([c[:, [0, 1]], c[:, [1, 2]], c[:, [0, 2]]])
+    e = e[e[:, 0] != e[:, 1]]
+    e.sort(axis=1)
+    return np.unique(e[:, 0] * nc + e[:, 1])
+
+
+def _greedy_components(nc, pairs, lo, hi):
+    """Union-find over ``pairs`` (in order) that refuses a union joining two classes of one
+    triangle edge (``lo[i]``, ``hi[i]``); only reached when a chain of near vertices would do so."""
+    parent = np.arange(nc)
+    adj = {}
+    for x, y in zip(lo.tolist(), hi.tolist()):
+        adj.setdefault(x, set()).add(y)
+        adj.setdefault(y, set()).add(x)
+
+    def find(x):
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    members = {}
+    for x, y in pairs.tolist():
+        rx, ry = find(x), find(y)
+        if rx == ry:
+            continue
+        mx, my = members.get(rx, [rx]), members.get(ry, [ry])
+        if len(mx) < len(my):
+            rx, ry, mx, my = ry, rx, my, mx
+        ny = set(my)
+        if any(adj.get(v, set()) & ny for v in mx):
+            continue
+        parent[ry] = rx
+        members[rx] = mx + my
+        members.pop(ry, None)
+    roots = np.array([find(x) for x in range(nc)])
+    _, comp = np.unique(roots, return_inverse=True)
+    return int(comp.max()) + 1 if nc else 0, comp
 
 
 def weld(mesh: SkinnedMesh, tolerance: float | None = None) -> tuple[SkinnedMesh, StageReport]:
@@ -179,7 +238,8 @@ def weld(mesh: SkinnedMesh, tolerance: float | None = None) -> tuple[SkinnedMesh
     """
     if tolerance is None:
         tolerance = WELD_RELATIVE * model_scale(mesh.positions)
-    keep, inverse, conflicts = weld_maps(mesh.positions, mesh.joint_indices, mesh.joint_weights, tolerance)
+    keep, inverse, conflicts = weld_maps(mesh.positions, mesh.joint_indices, mesh.joint_weights, tolerance,
+                                         mesh.triangles)
     tris = inverse[mesh.triangles]
     degenerate = (tris[:, 0] == tris[:, 1]) | (tris[:, 1] == tris[:, 2]) | (tris[:, 0] == tris[:, 2])
     kept_faces = ~degenerate
