@@ -123,7 +123,8 @@ def test_trs_matrices_match_naive():
     np.testing.assert_allclose(PK.trs_matrices(t, q, s), naive.trs(t, q, s), atol=1e-12)
 
 
-def test_factor_terms_match_naive():
+@pytest.mark.parametrize("compiled", [True, False])
+def test_factor_terms_match_naive(compiled):
     """The continuous certificate's per-(interval, joint) factor bounds, compiled, against their
     numpy transcription: random rotations, non-uniform and sign-changing scales, a joint the clip
     does not animate (its rest transform sheared), one zero scale."""
@@ -141,7 +142,7 @@ def test_factor_terms_match_naive():
     s[:3, 0] = s[0, 0]             # constant over the first intervals
     L = np.repeat(rest[None], T, 0)
     L[:, anim] = naive.trs(t, q / np.linalg.norm(q, axis=-1, keepdims=True), s)
-    got = B.factor_terms(L, t, q, s, anim, rest, C.OMEGA_MARGIN, C.ALPHA_MARGIN)
+    got = B.factor_terms(L, t, q, s, anim, rest, C.OMEGA_MARGIN, C.ALPHA_MARGIN, compiled=compiled)
     want = naive.factor_terms(L, t, q, s, anim, rest, C.OMEGA_MARGIN, C.ALPHA_MARGIN)
     ok = np.abs(np.linalg.det(L[..., :3, :3])) > 1e-12
     np.testing.assert_allclose(got[0][ok], want[0][ok], rtol=1e-9, atol=1e-9)

@@ -604,7 +604,14 @@ def _factor_terms(L, t, q, s, anim, omega_margin, alpha_margin, half_rel, Li, fw
             iso[i, j] = u0 and u1
 
 
-def factor_terms(L, t, q, s, anim, rest_local, omega_margin: float, alpha_margin: float):
+#: Below this many (interval, joint) pairs :func:`factor_terms` runs vectorised numpy instead of
+#: the compiled kernel: a demo-sized clip is done in well under a millisecond either way, and not
+#: compiling saves ~1.5 s of a cold start (``tools/compile-profile``); the benchmark's 500 frames x
+#: 40 joints take the kernel (4x faster there).
+FACTOR_KERNEL_MIN = 8_000
+
+
+def factor_terms(L, t, q, s, anim, rest_local, omega_margin: float, alpha_margin: float, compiled=None):
     """Per sample interval and joint, the factor bounds of the continuous certificate
     (:func:`runtime.certify.factor_bounds` documents and proves them).
 
@@ -617,8 +624,9 @@ def factor_terms(L, t, q, s, anim, rest_local, omega_margin: float, alpha_margin
     Returns
     -------
     Li (T, J, 4, 4) the inverses of ``L``; fw, iv (I, J, 3) forward / inverse ``(n0, n1, n2)``;
-    dt (I, J); eps (I, J, 2); iso (I, J) bool (I = T - 1).  Checked against the numpy reference
-    ``tests/naive.py:factor_terms``.
+    dt (I, J); eps (I, J, 2); iso (I, J) bool (I = T - 1).  ``compiled``: force the kernel (True)
+    or the numpy path (False); default by size (:data:`FACTOR_KERNEL_MIN`).  Both are checked
+    against the loop reference ``tests/naive.py:factor_terms``.
     """
     L = np.ascontiguousarray(L, dtype=np.float64)
     T, J = L.shape[:2]
@@ -631,8 +639,85 @@ def factor_terms(L, t, q, s, anim, rest_local, omega_margin: float, alpha_margin
         iv[:, :, 0] = (np.where(sv[:, -1] > 0, 1.0 / sv[:, -1], np.inf) * (1 + 1e-12))[None]
     iso = np.repeat((sv[:, 0] - sv[:, -1] <= 1e-12 * sv[:, 0])[None], I, 0)
     dt, eps = np.zeros((I, J)), np.zeros((I, J, 2))
-    Li = np.empty_like(L)
     f64 = (lambda a: np.ascontiguousarray(a, dtype=np.float64))
-    _factor_terms(L, f64(t), f64(q), f64(s), np.ascontiguousarray(anim, dtype=np.int64), float(omega_margin),
-                  float(alpha_margin), 3.0 * 2.0 ** -11, Li, fw, iv, dt, eps, iso)
+    anim = np.ascontiguousarray(anim, dtype=np.int64)
+    if compiled is None:
+        compiled = I * J >= FACTOR_KERNEL_MIN
+    if compiled:
+        Li = np.empty_like(L)
+        _factor_terms(L, f64(t), f64(q), f64(s), anim, float(omega_margin), float(alpha_margin), HALF_LERP_REL,
+                      Li, fw, iv, dt, eps, iso)
+    else:
+        Li = _inv_affine_numpy(L)
+        if len(anim) and I > 0:
+            _factor_terms_numpy(f64(t), f64(q), f64(s), anim, float(omega_margin), float(alpha_margin),
+                                fw, iv, dt, eps, iso)
     return Li, fw, iv, dt, eps, iso
+
+
+#: UsdSkel lerps half3 scales in half precision: three roundings, each within 2^-11 of the value.
+HALF_LERP_REL = 3.0 * 2.0 ** -11
+
+
+def _norm_last(x):
+    """Euclidean norms over the last axis (``np.linalg.norm(x, axis=-1)`` without its overhead)."""
+    return np.sqrt(np.einsum("...k,...k->...", x, x))
+
+
+def _max3(x):
+    """Largest of the last axis (length 3): numpy reduces such short axes slowly."""
+    return np.maximum(np.maximum(x[..., 0], x[..., 1]), x[..., 2])
+
+
+def _min3(x):
+    return np.minimum(np.minimum(x[..., 0], x[..., 1]), x[..., 2])
+
+
+def _inv_affine_numpy(L):
+    """:func:`_inv_affine_into` vectorised over (..., 4, 4), component by component."""
+    m = [[L[..., i, j] for j in range(3)] for i in range(3)]
+    adj = [[m[1][1] * m[2][2] - m[1][2] * m[2][1], m[0][2] * m[2][1] - m[0][1] * m[2][2],
+            m[0][1] * m[1][2] - m[0][2] * m[1][1]],
+           [m[1][2] * m[2][0] - m[1][0] * m[2][2], m[0][0] * m[2][2] - m[0][2] * m[2][0],
+            m[0][2] * m[1][0] - m[0][0] * m[1][2]],
+           [m[1][0] * m[2][1] - m[1][1] * m[2][0], m[0][1] * m[2][0] - m[0][0] * m[2][1],
+            m[0][0] * m[1][1] - m[0][1] * m[1][0]]]
+    det = m[0][0] * adj[0][0] + m[0][1] * adj[1][0] + m[0][2] * adj[2][0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_det = np.where(det != 0.0, 1.0 / np.where(det != 0.0, det, 1.0), np.inf)
+    out = np.zeros_like(L)
+    t = [L[..., i, 3] for i in range(3)]
+    with np.errstate(invalid="ignore"):
+        for i in range(3):
+            for j in range(3):
+                out[..., i, j] = adj[i][j] * inv_det
+            out[..., i, 3] = -(out[..., i, 0] * t[0] + out[..., i, 1] * t[1] + out[..., i, 2] * t[2])
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def _factor_terms_numpy(t, q, s, a, omega_margin, alpha_margin, fw, iv, dt, eps, iso):
+    """:func:`_factor_terms`'s interval loop, vectorised (fills the animated joints' columns)."""
+    qn = q / _norm_last(q)[..., None]
+    q0, q1 = qn[:-1], qn[1:]
+    sq1 = np.where(np.einsum("iak,iak->ia", q0, q1) < 0, -1.0, 1.0)[..., None] * q1
+    theta = 4.0 * np.arctan2(_norm_last(q0 - sq1), _norm_last(q0 + sq1))
+    om = omega_margin * theta
+    al = alpha_margin * theta ** 2
+    sa = np.abs(s)
+    smax = np.maximum(_max3(sa[:-1]), _max3(sa[1:]))
+    smin = np.minimum(_min3(sa[:-1]), _min3(sa[1:]))
+    smin = np.where(_max3(np.sign(s[:-1]) != np.sign(s[1:])), 0.0, smin)
+    ds = _max3(np.abs(s[1:] - s[:-1]))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        inv_s = np.where(smin > 0, 1.0 / np.where(smin > 0, smin, 1.0), np.inf)
+        fw[:, a] = np.stack([smax, om * smax + ds, al * smax + 2 * om * ds], -1)
+        ivs = np.stack([inv_s, ds * inv_s ** 2 + om * inv_s,
+                        2 * ds ** 2 * inv_s ** 3 + 2 * om * ds * inv_s ** 2 + al * inv_s], -1)
+        iv[:, a] = np.where((smin > 0)[..., None] & np.isfinite(ivs), ivs, np.inf)
+        dt[:, a] = _norm_last(t[1:] - t[:-1])
+        e = np.where(ds > 0, HALF_LERP_REL * smax, 0.0)
+        ei = np.where(e > 0, e / np.where(e > 0, smin * (smin - e), 1.0), 0.0)
+    iso[:, a] = (_max3(s[:-1]) == _min3(s[:-1])) & (_max3(s[1:]) == _min3(s[1:]))  # uniform at both ends
+    eps[:, a, 0] = e
+    eps[:, a, 1] = np.where((e > 0) & ~(smin > e), np.inf, ei)
