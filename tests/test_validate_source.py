@@ -122,3 +122,36 @@ def test_cli_exit_status(limb, tmp_path):
     assert run(asset, "--source", SAMPLES / "creature.glb").returncode == 1
     missing = run(asset, "--source", tmp_path / "nope.glb")
     assert missing.returncode == 2 and "no such file" in missing.stderr
+
+
+def test_centimetre_mesh_bound_by_scaled_joints_judged_at_its_posed_size(tmp_path):
+    """``realworld/playcanvas_lumberjack.glb`` binds a centimetre mesh by x100 joints and moves
+    it in metres: its bind pose is 265 units across, its posed body 2.4.  COL601 judges motion
+    at the posed size (a 3 mm shift of one frame is caught; against the bind pose's size it
+    would pass under 2.6 cm), and allows each clip the half3 storage bound it states (its
+    stretch bones), so the fresh import matches its own source."""
+    src = ROOT.parent / "shared" / "corpus" / "realworld" / "playcanvas_lumberjack.glb"
+    if not src.is_file():
+        pytest.skip("corpus file absent")
+    from pipeline.run import import_asset
+    from validators.asset import LoadedAsset, open_stage
+    from validators.source import compare_source
+
+    out = tmp_path / "lumberjack.usda"
+    import_asset(src, out)
+    rep = check_asset(str(out), source=str(src))
+    assert rep.passed and "COL601" not in _codes(rep), [(f.code, f.message) for f in rep.findings][:3]
+    c = compare_source(LoadedAsset(open_stage(str(out)), str(out)), src)
+    assert c.size > 100 and 2.0 < c.clip_size["Walk"] < 3.0, (c.size, c.clip_size)
+    assert 0 < c.clip_storage["Walk"] < 1e-3
+    bad = _copy(out, tmp_path)
+    stage = Usd.Stage.Open(str(bad))
+    anim = stage.GetPrimAtPath("/playcanvas_lumberjack/Walk")
+    tr = anim.GetAttribute("translations")
+    t = tr.GetTimeSamples()[10]
+    v = np.array(tr.Get(t))
+    v[0] += [0.003, 0.0, 0.0]  # the root joint moved by 3 mm on frame 10
+    tr.Set(Vt.Vec3fArray.FromNumpy(v.astype(np.float32)), t)
+    stage.GetRootLayer().Save()
+    f = check_asset(str(bad), source=str(src)).by_code("COL601")
+    assert f and f[0].location["clip"] == "Walk" and f[0].location["frame"] == 10, f

@@ -33,6 +33,11 @@ class SourceCheck:
     recorded_sha256 : str      the provenance's ``sourceSha256`` ('' when absent)
     size : float               model size (stage units) the tolerances are relative to
     clip_motion : dict         clip -> (max error in stage units, frame index, time code, asset vertex)
+    clip_size : dict           clip -> model size (stage units) of the asset as the clip's first frame
+                               poses it (the bind pose can be at another scale: a centimetre mesh
+                               bound by x100 joints)
+    clip_storage : dict        clip -> the storage error bound the clip states (relative to that
+                               size; 0 when none): what UsdSkel's half3 scales move at the frames
     clip_problems : list       (clip, message) for clips missing on either side or on other frames
     unmatched_asset : (u,) int asset vertices with no source vertex at their bind position
     unmatched_source : int     source vertices with no asset vertex at their bind position
@@ -44,6 +49,8 @@ class SourceCheck:
     recorded_sha256: str = ""
     size: float = 1.0
     clip_motion: dict = field(default_factory=dict)
+    clip_size: dict = field(default_factory=dict)
+    clip_storage: dict = field(default_factory=dict)
     clip_problems: list = field(default_factory=list)
     unmatched_asset: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     unmatched_source: int = 0
@@ -118,6 +125,12 @@ def compare_source(asset, source_path, chunk_frames: int = 64) -> SourceCheck:
             skel = asset.skel_transforms(asset.anim_local(clip, times))
             xf = skinning_transforms(skel, inv_bind, asset.geom_bind, asset.skel_world)
             pa = skin_frames(asset.points, asset.jidx, asset.jw, xf).astype(np.float64)
+            if f0 == 0:
+                fin = pa[0][np.all(np.isfinite(pa[0]), axis=1)]
+                posed = float(np.linalg.norm(fin.max(0) - fin.min(0))) if len(fin) else 0.0
+                out.clip_size[clip.name] = posed if np.isfinite(posed) and posed > 0 else out.size
+                stated = (clip.prim.GetCustomDataByKey(schema.CLIP_SOURCE_KEY) or {}).get("storageErrorBoundRelative")
+                out.clip_storage[clip.name] = float(stated) if stated is not None and np.isfinite(stated) else 0.0
             ps = skin_points(m, skel_transforms(sc.local[f0:f0 + chunk], m.parents))
             err = np.linalg.norm(pa[:, :, None, :] - ps[:, cand, :], axis=-1)  # (f, n, k)
             per_cand = np.maximum(per_cand, err.max(axis=0))
