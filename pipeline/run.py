@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, field
 from . import __version__
 from .errors import InputError, UsageError
 from .model import SkinnedMesh
-from .readers import read
+from .isolation import read_isolated
 from .stages import StageReport
 from .stages.bake import bake
 from .stages.bind import UNWEIGHTED_POLICIES, bind
@@ -114,7 +114,7 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None):
         return out[0]
 
     def do_read():
-        m = read(src, meshes=s.meshes or None, fps=s.fps)
+        m = read_isolated(src, meshes=s.meshes or None, fps=s.fps)  # a native crash: one InputError
         if s.source_up_axis or s.source_meters_per_unit:
             m = m.replace(up_axis=s.source_up_axis or m.up_axis,
                           meters_per_unit=s.source_meters_per_unit or m.meters_per_unit)
