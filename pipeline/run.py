@@ -7,6 +7,8 @@ import os
 import time
 from dataclasses import asdict, dataclass, field
 
+import numpy as np
+
 from . import __version__
 from .errors import InputError, UsageError
 from .model import SkinnedMesh
@@ -94,6 +96,63 @@ def sha256_of(path) -> str:
     return h.hexdigest()
 
 
+#: A linear map whose columns are this much shorter than its longest one, or this far from
+#: independent (``|det| / product of column lengths``), is degenerate: inverting it (every
+#: stage maps points into joint space) gives garbage or fails.  Real rigs are nowhere near.
+DEGENERATE_RATIO = 1e-6
+
+
+def _degenerate(m: np.ndarray) -> np.ndarray:
+    """Which of the transforms ``m`` (..., 4, 4) are not finite or have a degenerate 3x3 part:
+    a bool array of shape ``m.shape[:-2]``."""
+    a = m[..., :3, :3]
+    finite = np.isfinite(m).all(axis=(-2, -1))
+    a = np.where(finite[..., None, None], a, 0.0)
+    with np.errstate(all="ignore"):
+        cols = np.linalg.norm(a, axis=-2)
+        longest = cols.max(axis=-1)
+        det = np.abs(np.linalg.det(a))
+        bad = (cols.min(axis=-1) <= DEGENERATE_RATIO * longest) | (det <= DEGENERATE_RATIO * cols.prod(axis=-1))
+    return ~finite | bad | (longest == 0)
+
+
+def check_read(mesh: SkinnedMesh, src) -> None:
+    """What every stage assumes of a reader's result, checked once for every reader: faces,
+    finite positions and weights, in-range joint indices, a positive frame rate, and finite,
+    invertible bind and animated joint transforms.  Raises :class:`InputError` naming the file
+    (a corrupt or hostile file otherwise ends in a singular-matrix failure or NaN warnings
+    several stages later)."""
+    m = mesh
+    if m.face_count == 0:
+        raise InputError(src, "the skinned mesh has no faces")
+    if not np.isfinite(m.positions).all():
+        bad = int((~np.isfinite(m.positions)).any(axis=1).sum())
+        raise InputError(src, f"{bad} vertex position(s) are not finite (NaN, infinite, or beyond float32's range)")
+    w = m.joint_weights
+    if not np.isfinite(w).all() or (w < 0).any():
+        raise InputError(src, "skin weights are negative or not finite")
+    ji = m.joint_indices
+    if len(ji) and m.joint_count and (ji.min() < 0 or ji.max() >= m.joint_count):
+        raise InputError(src, f"skin joint index out of range for {m.joint_count} joints")
+    fps = m.time_codes_per_second
+    if not (np.isfinite(fps) and fps > 0):
+        raise InputError(src, f"the file's frame rate ({fps:g}) is not a positive number (give --fps)")
+    for what, mats in (("geometry bind transform", m.geom_bind[None]), ("bind transform", m.bind_transforms),
+                       ("rest transform", m.rest_transforms)):
+        bad = np.flatnonzero(_degenerate(mats))
+        if len(bad):
+            who = f" of joint {m.joint_names[bad[0]]!r}" if what != "geometry bind transform" else ""
+            raise InputError(src, f"the {what}{who} is not finite or not invertible (zero scale?)")
+    for c in m.clips:
+        if not np.isfinite(c.times).all():
+            raise InputError(src, f"clip {c.name!r} has non-finite time codes")
+        bad = np.argwhere(_degenerate(c.local))
+        if len(bad):
+            f, j = bad[0]
+            raise InputError(src, f"clip {c.name!r} frame {f} (time {c.times[f]:g}): joint {m.joint_names[j]!r} has a "
+                                  "transform that is not finite or not invertible (zero scale?)")
+
+
 def build_collider(src, settings: ImportSettings | None = None, progress=None):
     """Run every stage but ``write``: returns ``(mesh, reports)``.
 
@@ -119,8 +178,7 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None):
             m = m.replace(up_axis=s.source_up_axis or m.up_axis,
                           meters_per_unit=s.source_meters_per_unit or m.meters_per_unit)
         m = m.replace(source={**m.source, "path": os.fspath(src)})
-        if m.face_count == 0:
-            raise InputError(src, "the skinned mesh has no faces")
+        check_read(m, src)
         rep = StageReport("read", counts={
             "vertices": m.vertex_count, "faces": m.face_count, "joints": m.joint_count,
             "clips": len(m.clips), "frames": sum(c.frame_count for c in m.clips),

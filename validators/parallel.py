@@ -28,7 +28,8 @@ import json
 import os
 from dataclasses import dataclass, field
 
-from pipeline.engine import Engine, Progress, Task, crash_hook, expand_inputs, make_backend
+from pipeline.engine import Engine, InlineBackend, Progress, Task, crash_hook, expand_inputs, make_backend
+from pipeline.isolation import ChildFailed, contained
 from pipeline.readers import USD_EXTENSIONS
 
 from .runner import _crash_report, check_asset
@@ -43,6 +44,57 @@ PROOF_RULES = ("COL403", "COL404")
 # ------------------------------------------------------------------------------ work units
 def unit_check(path, kw):
     crash_hook(path)
+    return check_asset(path, **kw)
+
+
+#: Seconds the contained read of one crate asset may take (``--jobs 1``; see :func:`unit_check_contained`).
+PROBE_TIMEOUT = 600.0
+
+
+def is_crate(path) -> bool:
+    """Whether ``path`` holds binary crate data (``.usdc``, ``.usdz``, or a ``.usd`` in crate form)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+    except OSError:
+        return False
+    return head == b"PXR-USDC" or head[:4] == b"PK\x03\x04"
+
+
+def _probe(path):
+    """Read everything of the asset that usd-core decodes natively: the stage, the arrays
+    :class:`validators.asset.LoadedAsset` reads, and every time sample of every clip (crate
+    values are decoded lazily, on first read)."""
+    from .asset import CLIP_ATTRS, LoadedAsset, open_stage
+    asset = LoadedAsset(open_stage(path), path)
+    for clip in asset.clips:
+        for name in CLIP_ATTRS:
+            attr = clip.prim.GetAttribute(name)
+            if attr:
+                for t in clip.times:
+                    attr.Get(float(t))
+    return True
+
+
+def unit_check_contained(path, kw):
+    """``--jobs 1``: :func:`unit_check`, after a contained read of a crate asset.
+
+    usd-core decodes a crate file (LZ4, compressed integers, offsets) in C++ in this process; a
+    hostile one can crash it natively, which would end the whole run with no report.  So a crate
+    asset is first read in a forked child (:func:`pipeline.isolation.contained`): if that child
+    dies, the asset gets a ``COL001`` finding and the other assets are still checked; if it
+    lives, the asset is checked here as usual.  Text assets (``.usda``) are parsed completely when
+    opened, by a parser that has not been seen to crash, and are not read twice.  With
+    ``--jobs > 1`` the worker processes are the containment (the engine retries, then reports).
+    """
+    if is_crate(path):
+        try:
+            contained(_probe, path, path=path, timeout=PROBE_TIMEOUT)
+        except ChildFailed as e:
+            what = "reading it took too long" if e.timed_out else f"usd-core crashed reading it ({e})"
+            return _crash_report(path, what, kw)
+        except Exception:
+            pass  # an ordinary read error: check_asset reports it (COL001)
     return check_asset(path, **kw)
 
 
@@ -121,8 +173,10 @@ def check_many(paths, jobs=1, scheduler=None, progress=False, split_bytes=SPLIT_
             finish(i, _crash_report(assets[i], e, kw))
         return f
 
+    unit = unit_check_contained if isinstance(backend, InlineBackend) else unit_check
+
     def check_task(i):
-        return Task(unit_check, (assets[i], kw), lambda rep: finish(i, rep), lost(i), lost(i))
+        return Task(unit, (assets[i], kw), lambda rep: finish(i, rep), lost(i), lost(i))
 
     def split_task(i):
         path = assets[i]

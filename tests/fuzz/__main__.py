@@ -16,6 +16,8 @@ def _replay(path):
     dirs = [path] if os.path.exists(os.path.join(path, "recipe.json")) else sorted(
         os.path.join(path, d) for d in os.listdir(path) if os.path.exists(os.path.join(path, d, "recipe.json")))
     bad = 0
+    assets = {}  # validate cases: the good assets of the campaign's work folder are gone, make them again
+    work = None
     for d in dirs:
         with open(os.path.join(d, "recipe.json")) as fh:
             rec = json.load(fh)
@@ -23,13 +25,20 @@ def _replay(path):
         with open(os.path.join(d, name), "rb") as fh:
             data = fh.read()
         if rec["kind"] == "validate" and not os.path.exists(rec["seed"]):
-            print(f"{d}: skipped (its good asset {rec['seed']} is gone; rerun the campaign's case instead)")
-            continue
+            if work is None:
+                import tempfile
+                from .seeds import derived_seeds
+                work = tempfile.mkdtemp(prefix="colossus-fuzz-replay-")
+                assets = {s.ext: s.path for s in derived_seeds(work)[1]}
+            rec["seed"] = assets[rec["ext"]]
         out = run_case({k: rec[k] for k in ("index", "campaign", "kind", "seed", "ext", "steps", "subprocess")}, data=data)
         bad += bool(out["problems"])
         print(f"{d}: {out['outcome']} (exit {out['exit']}) {'BAD: ' + out['class'] if out['problems'] else 'ok'}")
         if out["stderr"]:
             print(f"    stderr: {out['stderr'][-300:]}")
+    if work is not None:
+        import shutil
+        shutil.rmtree(work, ignore_errors=True)
     return 1 if bad else 0
 
 

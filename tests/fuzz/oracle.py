@@ -37,8 +37,8 @@ import numpy as np
 
 from .mutators import mutate
 
-#: Longest acceptable error line (characters, the path included).
-MAX_MESSAGE = 400
+#: Longest acceptable error line (characters, not counting the input's path).
+MAX_MESSAGE = 300
 
 #: Codes of the validator that mean "the check itself failed", never acceptable on our own asset.
 CHECK_FAILURES = ("COL001", "COL002", "COL003")
@@ -115,7 +115,7 @@ def _common(problems, exc, warns, native, where):
         problems.append(f"{where}: native stderr output: {_norm(native.strip().splitlines()[-1])}")
 
 
-def _judge_error_line(problems, code, stderr, where):
+def _judge_error_line(problems, code, stderr, where, src=""):
     lines = [ln for ln in stderr.splitlines() if ln.strip()]
     if len(lines) != 1:
         problems.append(f"{where}: exit {code} with {len(lines)} stderr lines: {_norm(lines[-1]) if lines else ''}")
@@ -128,9 +128,11 @@ def _judge_error_line(problems, code, stderr, where):
     m = re.search(r"internal error \((\w+)", line)
     if m:
         problems.append(f"{where}: internal error {m.group(1)}: {_norm(line.split(m.group(1), 1)[1])}")
-    if "out of memory" in line or "bad_alloc" in line:
+    if "out of memory" in line:  # our MemoryError mapping: an allocation escaped the readers' budget
         problems.append(f"{where}: out of memory (an allocation escaped the budget)")
-    if len(line) > MAX_MESSAGE:
+    if "Error in 'pxrInternal" in line or "Error in 'pxr" in line:
+        problems.append(f"{where}: usd-core's raw error text (function, source line) not reduced to its reason")
+    if len(line) - line.count(src) * len(src) > MAX_MESSAGE:
         problems.append(f"{where}: message of {len(line)} characters")
 
 
@@ -176,7 +178,7 @@ def _run_import(case, src, workdir, timeout):
             outcome = _validate_written(out, problems)
     elif code == 1:
         outcome = "rejected"
-        _judge_error_line(problems, code, stderr, where)
+        _judge_error_line(problems, code, stderr, where, src)
         left = os.listdir(out_dir)
         if left:
             problems.append(f"{where}: exit 1 but left {'the output' if 'asset.usda' in left else 'a temporary file'} behind")
