@@ -21,7 +21,7 @@ from .stages.parts import parts
 from .stages.spheres import spheres
 from .stages.weld import weld
 from .stages.write import check_output_path, write
-from .tolerances import PARTS_ANY_THRESHOLD
+from .tolerances import DEGENERATE_RATIO, LARGEST_COORDINATE, PARTS_ANY_THRESHOLD
 
 STAGES = ("read", "bake", "weld", "orient", "bind", "parts", "spheres", "write")
 
@@ -96,24 +96,19 @@ def sha256_of(path) -> str:
     return h.hexdigest()
 
 
-#: A linear map whose columns are this much shorter than its longest one, or this far from
-#: independent (``|det| / product of column lengths``), is degenerate: inverting it (every
-#: stage maps points into joint space) gives garbage or fails.  Real rigs are nowhere near.
-DEGENERATE_RATIO = 1e-6
-
-
 def _degenerate(m: np.ndarray) -> np.ndarray:
-    """Which of the transforms ``m`` (..., 4, 4) are not finite or have a degenerate 3x3 part:
-    a bool array of shape ``m.shape[:-2]``."""
+    """Which of the transforms ``m`` (..., 4, 4) are not finite, have an entry beyond
+    ``LARGEST_COORDINATE`` or a degenerate 3x3 part: a bool array of shape ``m.shape[:-2]``."""
     a = m[..., :3, :3]
-    finite = np.isfinite(m).all(axis=(-2, -1))
-    a = np.where(finite[..., None, None], a, 0.0)
+    with np.errstate(invalid="ignore"):
+        bounded = (np.abs(m) <= LARGEST_COORDINATE).all(axis=(-2, -1))  # False for NaN too
+    a = np.where(bounded[..., None, None], a, 0.0)
     with np.errstate(all="ignore"):
         cols = np.linalg.norm(a, axis=-2)
         longest = cols.max(axis=-1)
         det = np.abs(np.linalg.det(a))
         bad = (cols.min(axis=-1) <= DEGENERATE_RATIO * longest) | (det <= DEGENERATE_RATIO * cols.prod(axis=-1))
-    return ~finite | bad | (longest == 0)
+    return ~bounded | bad | (longest == 0)
 
 
 def check_read(mesh: SkinnedMesh, src) -> None:
@@ -125,9 +120,11 @@ def check_read(mesh: SkinnedMesh, src) -> None:
     m = mesh
     if m.face_count == 0:
         raise InputError(src, "the skinned mesh has no faces")
-    if not np.isfinite(m.positions).all():
-        bad = int((~np.isfinite(m.positions)).any(axis=1).sum())
-        raise InputError(src, f"{bad} vertex position(s) are not finite (NaN, infinite, or beyond float32's range)")
+    with np.errstate(invalid="ignore"):
+        off = ~(np.abs(m.positions) <= LARGEST_COORDINATE).all(axis=1)  # NaN counts too
+    if off.any():
+        raise InputError(src, f"{int(off.sum())} vertex position(s) are not finite or beyond +-{LARGEST_COORDINATE:g} "
+                              "(float32 skinning would overflow)")
     w = m.joint_weights
     if not np.isfinite(w).all() or (w < 0).any():
         raise InputError(src, "skin weights are negative or not finite")
@@ -142,7 +139,7 @@ def check_read(mesh: SkinnedMesh, src) -> None:
         bad = np.flatnonzero(_degenerate(mats))
         if len(bad):
             who = f" of joint {m.joint_names[bad[0]]!r}" if what != "geometry bind transform" else ""
-            raise InputError(src, f"the {what}{who} is not finite or not invertible (zero scale?)")
+            raise InputError(src, f"the {what}{who} is not finite, not invertible (zero scale?) or huge")
     for c in m.clips:
         if not np.isfinite(c.times).all():
             raise InputError(src, f"clip {c.name!r} has non-finite time codes")
@@ -150,7 +147,7 @@ def check_read(mesh: SkinnedMesh, src) -> None:
         if len(bad):
             f, j = bad[0]
             raise InputError(src, f"clip {c.name!r} frame {f} (time {c.times[f]:g}): joint {m.joint_names[j]!r} has a "
-                                  "transform that is not finite or not invertible (zero scale?)")
+                                  "transform that is not finite, not invertible (zero scale?) or huge")
 
 
 def build_collider(src, settings: ImportSettings | None = None, progress=None):

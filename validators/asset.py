@@ -269,6 +269,46 @@ class LoadedAsset:
         offsets, verts = schema.part_vertex_csr(self.tris, self.part_offsets, self.part_faces, self.n)
         return offsets, verts.astype(np.int32)
 
+    @cached_property
+    def clip_sample_issues(self) -> dict:
+        """Every clip's malformed time samples, read once: ``{clip name: [issue, ...]}`` where an
+        issue is ``(attr, time, kind, detail)``, ``kind`` ``"length"`` (``detail``: the number of
+        entries, not one per clip joint) or ``"nonfinite"`` (``detail``: the first bad joint's
+        index), at most one of each kind per attribute (its first sample).
+
+        ``UsdSkel.AnimQuery`` silently falls back to identity transforms for a sample of the
+        wrong length (printing a warning), which would let the frame proof pass on poses the
+        asset does not have: such clips block the proof.  A value usd-core cannot decode raises
+        ``Tf.ErrorException`` (the runner makes it a ``COL001``)."""
+        out = {}
+        for c in self.clips:
+            issues = []
+            for a in CLIP_ATTRS:
+                attr = c.prim.GetAttribute(a)
+                if not attr:
+                    continue
+                seen = set()
+                for t in attr.GetTimeSamples():
+                    v = attr.Get(Usd.TimeCode(t))
+                    if v is None:
+                        continue
+                    arr = np.array(v, dtype=np.float64)  # quaternions come as (x, y, z, w): fine here
+                    if "length" not in seen and len(arr) != len(c.joints):
+                        issues.append((a, float(t), "length", len(arr)))
+                        seen.add("length")
+                    if "nonfinite" not in seen and arr.size:
+                        bad = ~np.all(np.isfinite(arr.reshape(len(arr), -1)), axis=1)
+                        if a == "rotations":
+                            with np.errstate(all="ignore"):
+                                bad |= ~(np.linalg.norm(arr.reshape(len(arr), -1), axis=1) >= 1e-12)
+                        if np.any(bad):
+                            issues.append((a, float(t), "nonfinite", int(np.argmax(bad))))
+                            seen.add("nonfinite")
+                    if len(seen) == 2:
+                        break
+            out[c.name] = issues
+        return out
+
     def anim_local(self, clip: Clip, times) -> np.ndarray:
         """(f, b, 4, 4) joint-local transforms of ``clip`` at ``times`` in skeleton joint order,
         evaluated by ``UsdSkel.AnimQuery`` (its interpolation between samples; joints the clip
@@ -414,4 +454,9 @@ class LoadedAsset:
             ok, why = self.ready(need)
             if not ok:
                 return ok, why
+        for name, issues in self.clip_sample_issues.items():
+            for a, t, kind, detail in issues:
+                what = (f"{a} has {detail} entries at time {t:g}, not one per joint" if kind == "length"
+                        else f"{a} are not finite at time {t:g}")
+                return False, f"clip {name!r}: {what}"
         return True, ""

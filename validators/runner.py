@@ -7,7 +7,7 @@ import time
 import traceback
 from pathlib import Path
 
-from pxr import Usd
+from pxr import Tf, Usd
 
 from pipeline.errors import one_line
 
@@ -128,10 +128,19 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
         return report
     ctx = Context(asset, **options)
     t_load = time.perf_counter() - t0
+    def undecodable(code, e):  # usd-core cannot decode what is read: a corrupt asset, not a rule bug
+        if not any(f.code == "COL001" for f in report.findings):
+            add("COL001", f"usd-core cannot read the asset's values (needed by {code}): {one_line(e)}")
+
     for rule in selector.rules():
         if rule.func is None:
             continue
-        blocked = next((asset.ready(n)[1] for n in rule.needs if not asset.ready(n)[0]), None)
+        try:  # readiness reads values too (every clip sample, for the frame proof)
+            blocked = next((asset.ready(n)[1] for n in rule.needs if not asset.ready(n)[0]), None)
+        except Tf.ErrorException as e:
+            undecodable(rule.code, e)
+            report.skipped[rule.code] = "usd-core cannot read what it needs"
+            continue
         if blocked is not None:
             report.skipped[rule.code] = blocked
             continue
@@ -142,6 +151,8 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
                 report.findings.append(Finding(rule.code, sev, h["message"], rule.name,
                                                {k: v for k, v in h["location"].items() if v is not None},
                                                h["sort_key"]))
+        except Tf.ErrorException as e:
+            undecodable(rule.code, e)
         except Exception as e:
             tb = traceback.extract_tb(e.__traceback__)[-1]
             add("COL002", f"rule {rule.code} ({rule.name}) crashed: {type(e).__name__}: {one_line(e)} "
@@ -179,7 +190,10 @@ def _stats(asset, ctx, t_load, t_total) -> dict:
     if ctx._proof is not None:
         s["frameproof"] = ctx._proof.stats()
     else:
-        ok, why = asset.ready("proof")
+        try:
+            ok, why = asset.ready("proof")
+        except Tf.ErrorException:
+            ok, why = False, "usd-core cannot read the asset's values"
         s["frameproof"] = {"checked": [], "not_checked": [
             "the frame proof did not run: " + (why if not ok else "COL403/COL404 not selected")]}
     return s

@@ -84,6 +84,7 @@ class Summary:
     bad: dict = field(default_factory=lambda: defaultdict(list))  # class -> [records]
     slowest: list = field(default_factory=list)
     subprocess_cases: int = 0
+    noise: int = 0
 
     @property
     def bad_count(self) -> int:
@@ -94,6 +95,7 @@ class Summary:
         self.outcomes[f"{rec['kind']}: {rec['outcome']}"] += 1
         self.by_format[f"{rec['kind']} {rec['ext']}"] += 1
         self.subprocess_cases += bool(rec.get("subprocess"))
+        self.noise += bool(rec.get("noise"))
         for name, _ in rec.get("steps", []):
             self.by_mutator[name] += 1
         if rec.get("problems"):
@@ -107,6 +109,7 @@ class Summary:
         lines.append("  cases per format: " + ", ".join(f"{k} {v}" for k, v in sorted(self.by_format.items())))
         lines.append("  outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(self.outcomes.items())))
         lines.append("  mutators: " + ", ".join(f"{k} {v}" for k, v in sorted(self.by_mutator.items())))
+        lines.append(f"  validate cases with usd-core diagnostics on stderr (noted, not judged): {self.noise}")
         lines.append("  slowest: " + ", ".join(f"#{i} {n} {s:.1f} s" for s, i, n in self.slowest))
         for cls, recs in sorted(self.bad.items(), key=lambda kv: -len(kv[1])):
             r = recs[0]
