@@ -32,7 +32,7 @@ from pipeline.engine import Engine, InlineBackend, Progress, Task, crash_hook, e
 from pipeline.isolation import ChildFailed, contained
 from pipeline.readers import USD_EXTENSIONS
 
-from .runner import _crash_report, check_asset
+from .runner import OPEN_FAILED, READ_FAILED, _crash_report, check_asset, unreadable_report
 
 #: Assets at least this large (bytes on disk) are split by clip across workers.
 SPLIT_BYTES = 64 * 2**20
@@ -64,16 +64,29 @@ def is_crate(path) -> bool:
 def _probe(path):
     """Read everything of the asset that usd-core decodes natively: the stage, the arrays
     :class:`validators.asset.LoadedAsset` reads, and every time sample of every clip (crate
-    values are decoded lazily, on first read)."""
+    values are decoded lazily, on first read).  Returns None, or the ``COL001`` message of
+    :func:`check_asset` when the asset cannot be opened or read (so it is not read twice)."""
+    from pipeline.errors import one_line
+
     from .asset import CLIP_ATTRS, LoadedAsset, open_stage
-    asset = LoadedAsset(open_stage(path), path)
-    for clip in asset.clips:
-        for name in CLIP_ATTRS:
-            attr = clip.prim.GetAttribute(name)
-            if attr:
-                for t in clip.times:
-                    attr.Get(float(t))
-    return True
+    try:
+        stage = open_stage(path)
+    except Exception as e:
+        return OPEN_FAILED.format(one_line(e))
+    try:
+        asset = LoadedAsset(stage, path)
+    except Exception as e:
+        return READ_FAILED.format(one_line(e))
+    try:
+        for clip in asset.clips:
+            for name in CLIP_ATTRS:
+                attr = clip.prim.GetAttribute(name)
+                if attr:
+                    for t in clip.times:
+                        attr.Get(float(t))
+    except Exception:
+        pass  # the rules report undecodable values (COL001) along with everything else
+    return None
 
 
 def unit_check_contained(path, kw):
@@ -83,18 +96,20 @@ def unit_check_contained(path, kw):
     hostile one can crash it natively, which would end the whole run with no report.  So a crate
     asset is first read in a forked child (:func:`pipeline.isolation.contained`): if that child
     dies, the asset gets a ``COL001`` finding and the other assets are still checked; if it
-    lives, the asset is checked here as usual.  Text assets (``.usda``) are parsed completely when
+    lives, the asset is checked here as usual (one that cannot even be opened gets the report
+    :func:`check_asset` would give, without being read again: a corrupt crate can make usd-core
+    allocate gigabytes before it gives up).  Text assets (``.usda``) are parsed completely when
     opened, by a parser that has not been seen to crash, and are not read twice.  With
     ``--jobs > 1`` the worker processes are the containment (the engine retries, then reports).
     """
-    if is_crate(path):
+    if is_crate(path) and os.access(path, os.R_OK):
         try:
-            contained(_probe, path, path=path, timeout=PROBE_TIMEOUT)
+            message = contained(_probe, path, path=path, timeout=PROBE_TIMEOUT)
         except ChildFailed as e:
             what = "reading it took too long" if e.timed_out else f"usd-core crashed reading it ({e})"
             return _crash_report(path, what, kw)
-        except Exception:
-            pass  # an ordinary read error: check_asset reports it (COL001)
+        if message is not None:  # cannot be opened or read: the same report check_asset gives
+            return unreadable_report(path, message, **kw)
     return check_asset(path, **kw)
 
 

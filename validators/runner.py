@@ -16,6 +16,10 @@ from .asset import LoadedAsset, open_stage
 from .findings import SEVERITIES, AssetReport, Finding
 from .registry import RuleSelector, get_rule
 
+#: COL001 messages of an asset usd-core cannot open, and of one whose prims cannot be read.
+OPEN_FAILED = "usd-core cannot open the asset: {}"
+READ_FAILED = "the asset could not be read: {}"
+
 DEFAULT_OPTIONS = {
     "max_influences": tol.MAX_INFLUENCES,
     "subframes": 0,
@@ -117,13 +121,13 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
         try:
             stage = open_stage(path)
         except Exception as e:  # usd-core raises Tf.ErrorException and friends
-            add("COL001", f"usd-core cannot open the asset: {one_line(e)}")
+            add("COL001", OPEN_FAILED.format(one_line(e)))
             report.sort()
             return report
     try:
         asset = LoadedAsset(stage, path)
     except Exception as e:
-        add("COL001", f"the asset could not be read: {one_line(e)}")
+        add("COL001", READ_FAILED.format(one_line(e)))
         report.sort()
         return report
     ctx = Context(asset, **options)
@@ -158,6 +162,18 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
             add("COL002", f"rule {rule.code} ({rule.name}) crashed: {type(e).__name__}: {one_line(e)} "
                           f"[{Path(tb.filename).name}:{tb.lineno}]", validator=rule.code)
     report.stats = _stats(asset, ctx, t_load, time.perf_counter() - t0)
+    report.sort()
+    return report
+
+
+def unreadable_report(path, message: str, select=None, ignore=None, severities=None, **options) -> AssetReport:
+    """The report :func:`check_asset` gives an asset it cannot open or read (``message``: its
+    ``COL001``, :data:`OPEN_FAILED` or :data:`READ_FAILED`), for a caller that already tried to
+    read it elsewhere (``validators.parallel``'s contained read) and need not read it twice."""
+    selector = RuleSelector(select, ignore)
+    report = AssetReport(os.fspath(path))
+    if selector.enabled("COL001"):
+        report.findings.append(_finding("COL001", message, severities))
     report.sort()
     return report
 
