@@ -98,7 +98,8 @@ def _invoke(args):
         warnings.simplefilter("always")
         res = CliRunner().invoke(main, args, catch_exceptions=True)
     exc = res.exception if res.exception is not None and not isinstance(res.exception, SystemExit) else None
-    return res.exit_code, res.stdout, res.stderr, exc, [f"{w.category.__name__}: {w.message}" for w in caught], native["text"]
+    shown = [f"{w.category.__name__}: {w.message} [in {os.path.basename(w.filename)}]" for w in caught]
+    return res.exit_code, res.stdout, res.stderr, exc, shown, native["text"]
 
 
 def _subprocess(args, timeout):
