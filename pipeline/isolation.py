@@ -2,7 +2,7 @@
 
 assimp and usd-core parse hostile bytes in C++, in our process.  A segfault or an abort there
 would kill ``colossus`` with no message.  :func:`contained` runs ``fn(*args)`` in a child made by
-``os.fork()`` and pipes its result (or its exception) back pickled, so a native crash, a runaway
+``os.fork()`` and hands its result (or its exception) back pickled, so a native crash, a runaway
 allocation or a hang becomes one :class:`ChildFailed` in the parent, which the callers turn into
 their usual one-line error naming the file (:func:`read_isolated` for ``colossus import``,
 ``validators.parallel`` for ``colossus validate --jobs 1``).
@@ -36,10 +36,13 @@ that means (before calling ``fn``) when its path contains ``SUBSTRING`` (any pat
 
 from __future__ import annotations
 
+import gc
+import mmap
 import os
 import pickle
 import select
 import signal
+import struct
 import sys
 import tempfile
 import time
@@ -138,8 +141,59 @@ def _rebuild(cls, args, state, tb):
     return exc
 
 
-def _child(write_fd: int, err_fd: int, fn, args, kwargs, path: str, memory: int | None) -> None:
-    """The child's whole life: never returns (``os._exit``)."""
+def _scratch(name: str):
+    """An anonymous read-write file: in memory (``memfd``) where Linux has it, else a temporary file."""
+    if hasattr(os, "memfd_create"):
+        try:
+            return os.fdopen(os.memfd_create(name, getattr(os, "MFD_CLOEXEC", 0)), "w+b")
+        except OSError:
+            pass
+    return tempfile.TemporaryFile()
+
+
+_ALIGN = 64
+
+
+def _pad(n: int) -> bytes:
+    return b"\x00" * (-n % _ALIGN)
+
+
+def _dump(obj) -> list:
+    """``obj`` as the pieces of one file: a header, the pickle (protocol 5), then every large
+    buffer (numpy arrays) raw and 64-byte aligned, out of band, so neither side copies them."""
+    bufs = []
+    main = pickle.dumps(obj, protocol=5, buffer_callback=bufs.append)
+    raws = [b.raw() for b in bufs]
+    head = struct.pack(f"<QQ{len(raws)}Q", len(main), len(raws), *(r.nbytes for r in raws))
+    parts = [head, main, _pad(len(head) + len(main))]
+    for r in raws:
+        parts += [r, _pad(r.nbytes)]
+    return parts
+
+
+def _load(fh):
+    """Read what :func:`_dump` wrote to ``fh``: the large buffers are used in place, from a
+    private (copy-on-write) mapping of the file, not copied."""
+    size = fh.seek(0, os.SEEK_END)
+    mm = mmap.mmap(fh.fileno(), size, access=mmap.ACCESS_COPY)
+    n_main, n_buf = struct.unpack_from("<QQ", mm, 0)
+    lens = struct.unpack_from(f"<{n_buf}Q", mm, 16)
+    pos = 16 + 8 * n_buf
+    main = mm[pos:pos + n_main]
+    pos += n_main
+    pos += -pos % _ALIGN
+    view, buffers = memoryview(mm), []
+    for n in lens:
+        buffers.append(view[pos:pos + n])
+        pos += n + (-n % _ALIGN)
+    return pickle.loads(main, buffers=buffers)
+
+
+def _child(out_fd: int, err_fd: int, fn, args, kwargs, path: str, memory: int | None) -> None:
+    """The child's whole life: never returns (``os._exit``).  The pickled answer goes to the file
+    ``out_fd`` (one write, no pipe ping-pong with the parent: on a loaded machine each 64 KiB
+    pipe round trip costs a scheduling delay); the parent learns it is done when the child's end
+    of the pipe closes, at exit."""
     code = 0
     try:
         signal.signal(signal.SIGINT, signal.SIG_DFL)  # Ctrl-C: the parent handles it, the child just dies
@@ -160,12 +214,13 @@ def _child(write_fd: int, err_fd: int, fn, args, kwargs, path: str, memory: int 
                 payload = _exception_payload(e)
         shown = [(str(w.message), w.category, w.filename, w.lineno) for w in caught]
         try:
-            data = pickle.dumps((payload, shown), protocol=pickle.HIGHEST_PROTOCOL)
+            parts = _dump((payload, shown))
         except Exception as e:
-            data = pickle.dumps((_exception_payload(e), shown), protocol=pickle.HIGHEST_PROTOCOL)
-        view = memoryview(data)
-        while view:
-            view = view[os.write(write_fd, view):]
+            parts = _dump((_exception_payload(e), shown))
+        for part in parts:
+            view = memoryview(part).cast("B")
+            while view:
+                view = view[os.write(out_fd, view):]
     except BaseException:
         code = 1
     finally:
@@ -211,16 +266,25 @@ def contained(fn, *args, path: str = "", timeout: float | None = None, memory: i
         except Exception:
             pass
     read_fd, write_fd = os.pipe()
-    err = tempfile.TemporaryFile()
+    err, out = _scratch("colossus-child-stderr"), _scratch("colossus-child-result")
     try:
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message=r".*use of fork\(\) may lead to deadlocks", category=DeprecationWarning)
-            pid = os.fork()
+            # the collector would write to the header of every object the parent made, each write
+            # a copy-on-write page fault in the child: freeze them out of its view, and do not
+            # collect in the short-lived child at all
+            gc.freeze()
+            try:
+                pid = os.fork()
+            finally:
+                if pid != 0:
+                    gc.unfreeze()
         if pid == 0:  # pragma: no cover - the child (coverage does not follow it)
+            gc.disable()
             os.close(read_fd)
-            _child(write_fd, err.fileno(), fn, args, kwargs, path, memory)
+            _child(out.fileno(), err.fileno(), fn, args, kwargs, path, memory)
         os.close(write_fd)
-        chunks, status, reason = [], None, None
+        status, reason = None, None
         deadline = None if timeout is None else time.monotonic() + timeout
         try:
             while True:
@@ -230,10 +294,8 @@ def contained(fn, *args, path: str = "", timeout: float | None = None, memory: i
                     reason = f"timed out after {timeout:g} s"
                     os.kill(pid, signal.SIGKILL)
                     break
-                chunk = os.read(read_fd, 1 << 20)
-                if not chunk:
+                if not os.read(read_fd, 1):  # the child never writes here: EOF is its exit
                     break
-                chunks.append(chunk)
         except BaseException:  # Ctrl-C (or anything) in the parent: the child goes too
             try:
                 os.kill(pid, signal.SIGKILL)
@@ -248,13 +310,14 @@ def contained(fn, *args, path: str = "", timeout: float | None = None, memory: i
         if reason is None:
             if os.WIFSIGNALED(status):
                 reason = _signal_name(os.WTERMSIG(status))
-            elif os.WEXITSTATUS(status) != 0 or not chunks:
+            elif os.WEXITSTATUS(status) != 0 or out.seek(0, os.SEEK_END) == 0:
                 reason = f"exit status {os.WEXITSTATUS(status)}"
         if reason is not None:
             raise ChildFailed(reason, _native_tail(err), timed_out=reason.startswith("timed out"))
+        payload, shown = _load(out)
     finally:
         err.close()
-    payload, shown = pickle.loads(b"".join(chunks))
+        out.close()
     for message, category, filename, lineno in shown:
         warnings.warn_explicit(message, category, filename, lineno)
     if payload[0] == "ok":
