@@ -454,6 +454,25 @@ def test_validate_short_clip_sample_blocks_the_proof(good_assets, tmp_path):
     assert rg["passed"]
 
 
+def test_validate_absurd_weights_no_warning(good_assets, tmp_path):
+    """Fuzz class 'RuntimeWarning: invalid value encountered in cast [in mesh.py]' (a corrupt crate
+    decoded to garbage): the weld check's grid keys of a weight of 3e38 no longer overflow int64."""
+    from pxr import Usd, UsdGeom
+    bad = tmp_path / "far.usda"
+    shutil.copy(good_assets[".usda"], bad)
+    stage = Usd.Stage.Open(str(bad))
+    mesh = next(p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh))
+    attr = mesh.GetAttribute("primvars:skel:jointWeights")
+    w = attr.Get()
+    w[0] = 3e38
+    attr.Set(w)
+    stage.GetRootLayer().Save()
+    proc = subprocess.run(COLOSSUS + ["validate", str(bad), "--format", "json"], capture_output=True, text=True,
+                          timeout=300, env={**os.environ, "PYTHONWARNINGS": "error::RuntimeWarning"})
+    rb = json.loads(proc.stdout)["assets"][0]
+    assert proc.returncode == 1 and "COL002" not in {f["code"] for f in rb["findings"]}, proc.stdout[-800:]
+
+
 def test_validate_non_utf8_asset_is_col001(good_assets, tmp_path):
     bad = tmp_path / "bytes.usda"
     data = good_assets[".usda"].read_bytes()

@@ -31,6 +31,7 @@ KNOWN_READER_CLASSES = (
     "usd-core's raw error text",                     # usd_reader._open cuts the message before one_line
     "internal error UnicodeDecodeError",             # usd_reader._open: str(Tf.ErrorException)
     "internal error RuntimeError: : Corrupt asset",  # usd_reader: usd-core's value errors escape
+    "internal error RuntimeError: : Failed to decompress data",  # (the same, a crate section)
     "internal error ErrorException",                 # (the same, when the exception class survives)
     "internal error ValueError: : all the input arrays must have same number of dimensions",  # assimp_reader
     "internal error ValueError: : Found zero norm quaternions",  # assimp_reader slerps zero keys

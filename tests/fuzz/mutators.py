@@ -505,7 +505,10 @@ def _data_uri(uri):
     if not isinstance(uri, str) or not uri.startswith("data:") or "base64," not in uri:
         return None
     head, _, b64 = uri.partition("base64,")
-    return head + "base64,", bytearray(base64.b64decode(b64))
+    try:
+        return head + "base64,", bytearray(base64.b64decode(b64))
+    except ValueError:  # binascii.Error: an earlier mutation broke it
+        return None
 
 
 def glb_json(data, rng):
