@@ -13,8 +13,9 @@ the result (measured by ``colossus bench --only import``), not seconds of import
 
 What the child does differently from an in-process call:
 
-* its stderr (fd 2, where native libraries print) goes to a temporary file: native chatter never
-  reaches the user; its last line is quoted when the child dies;
+* its stderr and stdout (fds 2 and 1, where native libraries print) go to an anonymous file:
+  native chatter never reaches the user (nor ``--json`` output); its last line is quoted when
+  the child dies;
 * Python warnings are recorded and re-issued in the parent (same category, message and
   location), so warning filters and tests see exactly what an in-process call would show;
 * its private writable memory is capped (``RLIMIT_DATA``: heap and anonymous maps, not the
@@ -198,6 +199,7 @@ def _child(out_fd: int, err_fd: int, fn, args, kwargs, path: str, memory: int | 
     try:
         signal.signal(signal.SIGINT, signal.SIG_DFL)  # Ctrl-C: the parent handles it, the child just dies
         os.dup2(err_fd, 2)
+        os.dup2(err_fd, 1)  # a library printing to stdout must not corrupt the command's own output (--json)
         if memory:
             import resource
             soft, hard = resource.getrlimit(resource.RLIMIT_DATA)
@@ -274,11 +276,19 @@ def contained(fn, *args, path: str = "", timeout: float | None = None, memory: i
             # a copy-on-write page fault in the child: freeze them out of its view, and do not
             # collect in the short-lived child at all
             gc.freeze()
+            pid = -1
             try:
                 pid = os.fork()
+            except OSError:  # no process to spare (EAGAIN, ENOMEM): read here, uncontained
+                pass
             finally:
                 if pid != 0:
                     gc.unfreeze()
+        if pid < 0:
+            os.close(write_fd)
+            err.close()
+            out.close()
+            return fn(*args, **kwargs)
         if pid == 0:  # pragma: no cover - the child (coverage does not follow it)
             gc.disable()
             os.close(read_fd)

@@ -286,6 +286,27 @@ def test_contained_call_round_trip():
         contained(np.ones, 2 * 10**8, memory=200 * 2**20)  # 1.5 GiB asked, 200 MiB allowed
 
 
+def test_contained_call_quiet_and_fallback(capfd, monkeypatch):
+    """What the child prints natively (fds 1 and 2) stays out of the command's output; where no
+    process can be forked (EAGAIN), the call runs in this process instead of failing."""
+    from pipeline.isolation import available, contained
+    if not available():
+        pytest.skip("no os.fork here")
+
+    def chatty():
+        os.write(1, b"native stdout\n")
+        os.write(2, b"native stderr\n")
+        return 1
+    assert contained(chatty) == 1
+    got = capfd.readouterr()
+    assert "native" not in got.out + got.err
+
+    def no_fork():
+        raise BlockingIOError(11, "Resource temporarily unavailable")
+    monkeypatch.setattr(os, "fork", no_fork)
+    assert contained(sum, [1, 2, 3]) == 6
+
+
 def test_reader_isolation_can_be_switched_off(work, monkeypatch):
     """COLOSSUS_ISOLATE=0 reads in-process (the fallback where fork is missing): same result."""
     from pipeline.isolation import read_isolated

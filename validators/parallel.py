@@ -110,7 +110,7 @@ def unit_check_contained(path, kw):
             return _crash_report(path, what, kw)
         if message is not None:  # cannot be opened or read: the same report check_asset gives
             return unreadable_report(path, message, **kw)
-    return check_asset(path, **kw)
+    return unit_check(path, kw)
 
 
 def unit_plan(path, kw):
