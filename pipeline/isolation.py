@@ -200,6 +200,8 @@ def _child(out_fd: int, err_fd: int, fn, args, kwargs, path: str, memory: int | 
         signal.signal(signal.SIGINT, signal.SIG_DFL)  # Ctrl-C: the parent handles it, the child just dies
         os.dup2(err_fd, 2)
         os.dup2(err_fd, 1)  # a library printing to stdout must not corrupt the command's own output (--json)
+        import faulthandler
+        faulthandler.disable()  # its dump may go to a copy of the parent's stderr (pytest's does): the parent reports
         if memory:
             import resource
             soft, hard = resource.getrlimit(resource.RLIMIT_DATA)

@@ -146,13 +146,13 @@ def make_bench_asset(path):
     pose = None
     for clip, t, skel_x in poses:
         if clip is None:
-            pts_t, sk = pts, bind
+            pts_t, sk = pts, schema.row_vector(bind)  # (written above in USD's row-vector layout)
         else:
             pose = col.pose(clip, t, out=pose)
             pts_t, sk = pose.points.astype(np.float64), pose.skel_transforms
         for p in range(JOINTS):
             v = d.verts[d.vert_offsets[p]:d.vert_offsets[p + 1]]
-            h = np.c_[pts_t[v], np.ones(len(v))] @ np.linalg.inv(sk[p])
+            h = np.c_[pts_t[v], np.ones(len(v))] @ np.linalg.inv(sk[p]).T  # column-vector skel transforms
             local[p].append(h[:, :3])
     centers, rads = np.zeros((JOINTS, 3)), np.zeros(JOINTS)
     for p in range(JOINTS):
@@ -259,6 +259,25 @@ def run_bench(path=None, repeat=50):
     it2 = iter(range(10 ** 9))
     base3 = _median_time(lambda: trimesh.proximity.closest_point(m, centers[next(it2) % 64][None]),
                          max(10, repeat // 2), warm=2)
+    # -- 5: any pose (IK / ragdoll): pose_from_joints with random joint rotations up to 180 degrees
+    from .kernels import bounds as B
+    from .kernels.pose import trs_matrices
+
+    rest = d.rest_local
+    rot = rng.normal(size=(64, len(d.joints), 3))
+    rot *= (rng.uniform(0, np.pi, size=(64, len(d.joints), 1)) / np.linalg.norm(rot, axis=2, keepdims=True))
+    quats = []
+    for k in range(64):  # axis-angle -> (x, y, z, w), numpy only
+        ang = np.linalg.norm(rot[k], axis=1, keepdims=True)
+        quats.append(np.c_[rot[k] / np.maximum(ang, 1e-30) * np.sin(ang / 2), np.cos(ang / 2)])
+    it5 = iter(range(10 ** 9))
+    locals_ = [trs_matrices(rest[:, :3, 3], q, np.ones((len(q), 3))) for q in quats]
+    fj = col.pose_from_joints(locals_[0])
+    ours5 = _median_time(lambda: col.pose_from_joints(locals_[next(it5) % 64], out=fj), repeat)
+    cert5 = _median_time(lambda: (B._pose_bounds_serial(fj._world1, *d.bounds.args(), fj._sph, fj._kb, fj._db),
+                                  B._cull_spheres(fj._sph, fj._kb, fj._db, fj.spheres, fj.cull)), repeat * 4)
+    skin5 = _median_time(lambda: (fj.__setattr__("_full", -1), fj._skin_all()), repeat)
+    refit = np.mean([col.pose_from_joints(L).refit.mean() for L in locals_[:16]])
     ctrl_rows = bench_controller(col, steps=max(60, 5 * repeat))
     if tmp is not None:
         tmp.cleanup()
@@ -277,6 +296,10 @@ def run_bench(path=None, repeat=50):
         dict(name="game frame, 16 rays across the whole model instead", ours_s=ours4, baseline_s=base2,
              speedup=base2 / ours4, goal="(worst case, no goal)", met=True,
              note="rays reach most parts: most of the skin gets skinned lazily"),
+        dict(name=f"pose_from_joints spheres certified ({col.parts} parts, tests K + D) vs skinning the pose",
+             ours_s=cert5, baseline_s=skin5, speedup=skin5 / cert5, goal="< 20 us", met=cert5 < 20e-6,
+             note=f"whole pose_from_joints {ours5 * 1e6:.1f} us (validation, joints, bounds, refits); random "
+                  f"rotations up to 180 degrees: {refit:.0%} of the spheres refit"),
     ] + ctrl_rows
 
 

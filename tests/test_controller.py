@@ -17,7 +17,7 @@ from runtime.controller import (FALLING, HANGING, HOLDING, SLIDING, STANDING, Ch
                                 Intent, carry_point, resolve_push)
 from runtime.controller import _along, _surface_frame
 from runtime.script import start_position
-from test_runtime import UsdSkelReference
+from usd_reference import UsdSkelReference
 from test_runtime_naive import (closest_point_on_triangles, inside_closed_mesh, naive_along,
                                 naive_carry, naive_push, naive_raycast)
 
@@ -254,7 +254,7 @@ def test_slides_on_a_slope_steeper_than_max_slope_and_stays_on_a_gentler_one(cre
 def _flank(col, t=0.0):
     """A point on the creature's flank at the middle of its back: ray in from the side."""
     pose = col.pose("walk", t)
-    mid = pose.joint_world[col.data.joints.index(next(j for j in col.data.joints if j.endswith("spine_1")))][3, :3]
+    mid = pose.joint_world[col.data.joints.index(next(j for j in col.data.joints if j.endswith("spine_1")))][:3, 3]  # column-vector: translation in the last column
     hit = pose.raycast(mid + [5.0, 0.0, 0.0], [-1.0, 0.0, 0.0])
     assert hit.hit[0] and abs(hit.normal[0] @ col.up) < 0.3
     return hit.point[0], hit.normal[0]

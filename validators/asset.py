@@ -16,7 +16,9 @@ from functools import cached_property
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel
 
+from runtime import asset as runtime_asset
 from runtime import schema
+from runtime.errors import ColliderError
 
 from . import tolerances as tol
 
@@ -51,6 +53,16 @@ class Clip:
     prim: Usd.Prim
     times: np.ndarray
     joints: list
+
+
+def _bad_values(attr: str, vals: np.ndarray) -> np.ndarray:
+    """``(n, A)`` bool: which joint values of ``(n, A, w)`` samples are not finite (or, for
+    rotations, a zero quaternion)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        bad = ~np.isfinite(vals).all(axis=-1)
+        if attr == "rotations":
+            bad |= ~(np.linalg.norm(vals, axis=-1) >= 1e-12)
+    return bad
 
 
 def open_stage(path: str) -> Usd.Stage:
@@ -271,43 +283,56 @@ class LoadedAsset:
 
     @cached_property
     def clip_sample_issues(self) -> dict:
-        """Every clip's malformed time samples, read once: ``{clip name: [issue, ...]}`` where an
-        issue is ``(attr, time, kind, detail)``, ``kind`` ``"length"`` (``detail``: the number of
-        entries, not one per clip joint) or ``"nonfinite"`` (``detail``: the first bad joint's
-        index), at most one of each kind per attribute (its first sample).
+        """Every clip's malformed time samples: ``{clip name: [issue, ...]}`` where an issue is
+        ``(attr, time, kind, detail)``, ``kind`` ``"length"`` (``detail``: the number of entries,
+        not one per clip joint) or ``"nonfinite"`` (``detail``: the first bad joint's name), at
+        most one of each kind per attribute.
 
-        ``UsdSkel.AnimQuery`` silently falls back to identity transforms for a sample of the
-        wrong length (printing a warning), which would let the frame proof pass on poses the
-        asset does not have: such clips block the proof.  A value usd-core cannot decode raises
+        A well-formed clip is judged on :meth:`clip_data` (read once, shared with the frame
+        proof); only a malformed one is scanned sample by sample to say where: ``UsdSkel``
+        silently poses a sample of the wrong length at identity, so the rules must find it at
+        any sample, not only the first.  A value usd-core cannot decode raises
         ``Tf.ErrorException`` (the runner makes it a ``COL001``)."""
         out = {}
         for c in self.clips:
+            try:
+                d = self.clip_data(c)
+            except ColliderError:
+                out[c.name] = self._scan_samples(c)
+                continue
             issues = []
-            for a in CLIP_ATTRS:
-                attr = c.prim.GetAttribute(a)
-                if not attr:
-                    continue
-                seen = set()
-                for t in attr.GetTimeSamples():
-                    v = attr.Get(Usd.TimeCode(t))
-                    if v is None:
-                        continue
-                    arr = np.array(v, dtype=np.float64)  # quaternions come as (x, y, z, w): fine here
-                    if "length" not in seen and len(arr) != len(c.joints):
-                        issues.append((a, float(t), "length", len(arr)))
-                        seen.add("length")
-                    if "nonfinite" not in seen and arr.size:
-                        bad = ~np.all(np.isfinite(arr.reshape(len(arr), -1)), axis=1)
-                        if a == "rotations":
-                            with np.errstate(all="ignore"):
-                                bad |= ~(np.linalg.norm(arr.reshape(len(arr), -1), axis=1) >= 1e-12)
-                        if np.any(bad):
-                            issues.append((a, float(t), "nonfinite", int(np.argmax(bad))))
-                            seen.add("nonfinite")
-                    if len(seen) == 2:
-                        break
+            for a, times, vals in (("translations", d.tt, d.vt), ("rotations", d.tr, d.vr), ("scales", d.ts, d.vs)):
+                bad = _bad_values(a, vals)
+                if bad.any():
+                    i, j = np.argwhere(bad)[0]
+                    issues.append((a, float(times[i]), "nonfinite", self.joints[d.anim_to_skel[j]]))
             out[c.name] = issues
         return out
+
+    def _scan_samples(self, c: Clip) -> list:
+        issues = []
+        for a in CLIP_ATTRS:
+            attr = c.prim.GetAttribute(a)
+            if not attr:
+                continue
+            seen = set()
+            for t in attr.GetTimeSamples():
+                v = attr.Get(Usd.TimeCode(t))
+                if v is None:
+                    continue
+                arr = np.array(v, dtype=np.float64)  # quaternions come as (x, y, z, w): fine here
+                if "length" not in seen and len(arr) != len(c.joints):
+                    issues.append((a, float(t), "length", len(arr)))
+                    seen.add("length")
+                if "nonfinite" not in seen and arr.size:
+                    bad = _bad_values(a, arr.reshape(1, len(arr), -1))[0]
+                    if np.any(bad):
+                        j = int(np.argmax(bad))
+                        issues.append((a, float(t), "nonfinite", c.joints[j] if j < len(c.joints) else None))
+                        seen.add("nonfinite")
+                if len(seen) == 2:
+                    break
+        return issues
 
     def anim_local(self, clip: Clip, times) -> np.ndarray:
         """(f, b, 4, 4) joint-local transforms of ``clip`` at ``times`` in skeleton joint order,
@@ -454,9 +479,34 @@ class LoadedAsset:
             ok, why = self.ready(need)
             if not ok:
                 return ok, why
-        for name, issues in self.clip_sample_issues.items():
-            for a, t, kind, detail in issues:
-                what = (f"{a} has {detail} entries at time {t:g}, not one per joint" if kind == "length"
-                        else f"{a} are not finite at time {t:g}")
-                return False, f"clip {name!r}: {what}"
+        if self.blend_shapes:
+            return False, f"the mesh has UsdSkel blend shapes ({self.blend_shapes}), which the proof does not model"
+        try:
+            for c in self.clips:
+                self.clip_data(c)
+        except ColliderError as e:
+            return False, f"a clip cannot be read: {e}"
         return True, ""
+
+    # -- the certificate's view ----------------------------------------------------------------
+    @cached_property
+    def blend_shapes(self) -> str:
+        """What UsdSkel blend shapes the mesh binds ("" for none): :func:`runtime.asset.blend_shapes`."""
+        return runtime_asset.blend_shapes(self.mesh) if self.mesh is not None else ""
+
+    def clip_data(self, clip: Clip):
+        """The clip's raw samples as :class:`runtime.asset.ClipData` (what UsdSkel interpolates
+        between frames); raises :class:`runtime.errors.ColliderError` when they are malformed."""
+        cache = self.__dict__.setdefault("_clip_data", {})
+        if clip.name not in cache:
+            cache[clip.name] = runtime_asset.read_clip(clip.prim, self.joint_index)
+        return cache[clip.name]
+
+    @cached_property
+    def rig(self):
+        """The asset as :class:`runtime.certify.Rig` (needs ``ready("proof")``)."""
+        from runtime.certify import Rig
+
+        poff, pverts = self.part_vertices
+        return Rig(self.points, self.jidx, self.jw, self.geom_bind, self.bind, self.rest, self.parents,
+                   self.part_joint_ids, self.part_centers, self.part_radii, poff, pverts, self.skel_world)

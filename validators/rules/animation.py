@@ -53,11 +53,10 @@ def finite_animation(asset, ctx):
     Why: one NaN joint transform throws its vertices and its part sphere to NaN.
     Example: a rotation `(nan, 0, 0, 0)` on frame 12 from a degenerate bake."""
     for c in asset.clips:
-        for a, t, kind, j in asset.clip_sample_issues[c.name]:
+        for a, t, kind, joint in asset.clip_sample_issues[c.name]:
             if kind != "nonfinite":
                 continue
             frame = int(np.searchsorted(c.times, t))
-            joint = c.joints[j] if j < len(c.joints) else None
             yield hit(f"clip {c.name!r} time {t:g}: {a} of joint {joint!r} is not finite (or a zero rotation)",
                       clip=c.name, time=float(t), frame=frame, joint=joint)
 
