@@ -148,9 +148,13 @@ def run_campaign(cases, jobs: int = 2, timeout: float = 60.0, keep: str | None =
     summary = Summary()
     todo = list(reversed(cases))
     startup = 300.0  # a cold worker compiles the numba kernels once
-    slots = [_Slot(ctx, timeout, keep, memory) for _ in range(max(1, min(jobs, len(cases))))]
-    for s in slots:
-        s.deadline = time.monotonic() + startup
+
+    def fresh():
+        slot = _Slot(ctx, timeout, keep, memory)
+        slot.deadline = time.monotonic() + startup
+        return slot
+
+    slots = [fresh() for _ in range(max(1, min(jobs, len(cases))))]
 
     def lost(slot, why):
         rec = {**slot.case, "steps": [], "outcome": why, "exit": None, "stderr": "", "problems": [why], "seconds": timeout}
@@ -192,8 +196,7 @@ def run_campaign(cases, jobs: int = 2, timeout: float = 60.0, keep: str | None =
                         elif not s.ready:
                             raise RuntimeError(f"a fuzz worker failed to start (exit {code})")
                         s.kill()
-                        slots[slots.index(s)] = _Slot(ctx, timeout, keep, memory)
-                        slots[-1].deadline = time.monotonic() + startup
+                        slots[slots.index(s)] = fresh()
                         continue
                     if kind == "ready":
                         s.ready = True
@@ -208,8 +211,7 @@ def run_campaign(cases, jobs: int = 2, timeout: float = 60.0, keep: str | None =
                         raise RuntimeError("a fuzz worker did not start in time")
                     summary.add(lost(s, f"timeout: the case ran over {timeout:g} s"))
                     s.kill()
-                    slots[slots.index(s)] = _Slot(ctx, timeout, keep, memory)
-                    slots[-1].deadline = time.monotonic() + startup
+                    slots[slots.index(s)] = fresh()
     finally:
         for s in slots:
             s.kill()
