@@ -29,12 +29,14 @@ test: setup
 bench: setup
 	$(VENV)/bin/colossus bench
 
-# A long fuzz campaign over every seed (samples/ and ../shared/corpus/, any size); every bad case
-# is saved under $(FUZZ_OUT)/ with its recipe (python -m tests.fuzz --replay $(FUZZ_OUT)).
+# A long fuzz campaign over every seed format (samples/ and ../shared/corpus/; seeds up to
+# MAX_SEED bytes, 0 for all of them); every bad case is saved under $(FUZZ_OUT)/ with its recipe
+# (python -m tests.fuzz --replay $(FUZZ_OUT)).
 N        ?= 10000
 FUZZ_OUT ?= fuzz-cases
+MAX_SEED ?= 1e6
 fuzz: setup
-	$(PY) -m tests.fuzz -n $(N) --max-seed-bytes 0 --out $(FUZZ_OUT)
+	$(PY) -m tests.fuzz -n $(N) --max-seed-bytes $(MAX_SEED) --out $(FUZZ_OUT)
 
 # Regenerate the Blender samples with bpy (CPython 3.11 only, in its own venv).
 samples:
