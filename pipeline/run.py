@@ -20,8 +20,9 @@ from .stages.orient import orient
 from .stages.parts import parts
 from .stages.spheres import spheres
 from .stages.weld import weld
-from .stages.write import check_output_path, write
-from .tolerances import DEGENERATE_RATIO, LARGEST_COORDINATE, PARTS_ANY_THRESHOLD
+from .stages.write import check_output_path, stored_clips, write
+from .tolerances import LARGEST_COORDINATE, PARTS_ANY_THRESHOLD, RESAMPLING_RELATIVE
+from .xforms import degenerate
 
 STAGES = ("read", "bake", "weld", "orient", "bind", "parts", "spheres", "write")
 
@@ -88,27 +89,26 @@ class ImportResult:
         }
 
 
+def mesh_provenance(info: list) -> dict:
+    """``{mesh name: {"kind": "skinned" | "rigid", "vertices": n[, "joint": name]}}`` for the
+    asset's provenance (primitives of one mesh added up)."""
+    out = {}
+    for x in info:
+        d = out.setdefault(x["name"], {"kind": x["kind"], "vertices": 0})
+        d["vertices"] += int(x["vertices"])
+        if x["kind"] != d["kind"]:
+            d["kind"] = "skinned and rigid"
+        if x.get("joint"):
+            d["joint"] = x["joint"]
+    return out
+
+
 def sha256_of(path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as fh:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
-
-
-def _degenerate(m: np.ndarray) -> np.ndarray:
-    """Which of the transforms ``m`` (..., 4, 4) are not finite, have an entry beyond
-    ``LARGEST_COORDINATE`` or a degenerate 3x3 part: a bool array of shape ``m.shape[:-2]``."""
-    a = m[..., :3, :3]
-    with np.errstate(invalid="ignore"):
-        bounded = (np.abs(m) <= LARGEST_COORDINATE).all(axis=(-2, -1))  # False for NaN too
-    a = np.where(bounded[..., None, None], a, 0.0)
-    with np.errstate(all="ignore"):
-        cols = np.linalg.norm(a, axis=-2)
-        longest = cols.max(axis=-1)
-        det = np.abs(np.linalg.det(a))
-        bad = (cols.min(axis=-1) <= DEGENERATE_RATIO * longest) | (det <= DEGENERATE_RATIO * cols.prod(axis=-1))
-    return ~bounded | bad | (longest == 0)
 
 
 def check_read(mesh: SkinnedMesh, src) -> None:
@@ -136,18 +136,72 @@ def check_read(mesh: SkinnedMesh, src) -> None:
         raise InputError(src, f"the file's frame rate ({fps:g}) is not a positive number (give --fps)")
     for what, mats in (("geometry bind transform", m.geom_bind[None]), ("bind transform", m.bind_transforms),
                        ("rest transform", m.rest_transforms)):
-        bad = np.flatnonzero(_degenerate(mats))
+        bad = np.flatnonzero(degenerate(mats))
         if len(bad):
             who = f" of joint {m.joint_names[bad[0]]!r}" if what != "geometry bind transform" else ""
             raise InputError(src, f"the {what}{who} is not finite, not invertible (zero scale?) or huge")
     for c in m.clips:
         if not np.isfinite(c.times).all():
             raise InputError(src, f"clip {c.name!r} has non-finite time codes")
-        bad = np.argwhere(_degenerate(c.local))
+        bad = np.argwhere(degenerate(c.local))
         if len(bad):
             f, j = bad[0]
             raise InputError(src, f"clip {c.name!r} frame {f} (time {c.times[f]:g}): joint {m.joint_names[j]!r} has a "
                                   "transform that is not finite, not invertible (zero scale?) or huge")
+
+
+def read_warnings(m: SkinnedMesh) -> list:
+    """The reader's findings worth a warning line: its notes, morph targets not carried, clips
+    whose resampling off the source's keys errs more than the tolerance, no clip at all."""
+    out = list(m.source.get("notes", []))
+    morph = m.source.get("morph_meshes") or {}
+    if morph:
+        out.append(f"morph targets / shape keys are not carried into the collider (it follows the skeleton only): "
+                   + ", ".join(f"{k} ({v})" for k, v in morph.items()))
+    for c in m.source.get("clip_info", []):
+        if c.get("error_bound_relative", 0.0) > RESAMPLING_RELATIVE:
+            out.append(f"clip {c['name']!r}: its keys fall between the {c['fps']:g} fps frames and resampling "
+                       f"moves vertices up to {c['error_bound_relative']:.2g} x the model size "
+                       f"(more than {RESAMPLING_RELATIVE:g}); import with --fps at the source's rate")
+    if not m.clips:
+        out.append("the file has no animation clip; spheres hold for the bind pose only")
+    return out
+
+
+def settings_from_provenance(settings: dict) -> ImportSettings:
+    """The :class:`ImportSettings` an asset was made with, from its provenance ``settings``
+    dictionary (empty strings stand for None; the mesh list was stored comma-separated)."""
+    base = asdict(ImportSettings())
+    out = {}
+    for k, default in base.items():
+        if k not in settings:
+            continue
+        v = settings[k]
+        if k == "meshes":
+            out[k] = [m for m in str(v).split(", ") if m] if not isinstance(v, (list, tuple)) else list(v)
+        elif v == "" or v is None:
+            out[k] = None if default is None else default
+        elif isinstance(default, float) or k in ("fps", "source_meters_per_unit"):
+            out[k] = float(v)
+        elif isinstance(default, int):
+            out[k] = int(v)
+        else:
+            out[k] = v
+    return ImportSettings(**out)
+
+
+def read_baked(src, settings: ImportSettings | None = None) -> SkinnedMesh:
+    """The source read and baked into the output convention exactly as ``import`` does (before
+    welding and rounding): what ``colossus validate --source`` compares an asset with.  Read in
+    a contained child and checked like import's read, so a hostile source is one InputError."""
+    s = settings or ImportSettings()
+    s.check()
+    m = read_isolated(src, meshes=s.meshes or None, fps=s.fps)
+    if s.source_up_axis or s.source_meters_per_unit:
+        m = m.replace(up_axis=s.source_up_axis or m.up_axis,
+                      meters_per_unit=s.source_meters_per_unit or m.meters_per_unit)
+    check_read(m, src)
+    return bake(m, s.up_axis, s.meters_per_unit)[0]
 
 
 def build_collider(src, settings: ImportSettings | None = None, progress=None):
@@ -176,13 +230,19 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None):
                           meters_per_unit=s.source_meters_per_unit or m.meters_per_unit)
         m = m.replace(source={**m.source, "path": os.fspath(src)})
         check_read(m, src)
+        info = m.source.get("mesh_info", [])
         rep = StageReport("read", counts={
             "vertices": m.vertex_count, "faces": m.face_count, "joints": m.joint_count,
             "clips": len(m.clips), "frames": sum(c.frame_count for c in m.clips),
             "format": m.source.get("format"), "meshes": len(m.source.get("meshes", [])),
-            "time_codes_per_second": m.time_codes_per_second})
-        if not m.clips:
-            rep.warnings.append("the file has no animation clip; spheres hold for the bind pose only")
+            "skinned_meshes": sum(1 for x in info if x["kind"] == "skinned"),
+            "rigid_meshes": sum(1 for x in info if x["kind"] == "rigid"),
+            "weights_normalised": (m.source.get("weights_normalised") or {}).get("vertices", 0),
+            "time_codes_per_second": m.time_codes_per_second},
+            details={"clips": m.source.get("clip_info", []), "meshes": info,
+                     "weights_normalised": m.source.get("weights_normalised", {}),
+                     "meshes_left_out": m.source.get("meshes_left_out", [])})
+        rep.warnings.extend(read_warnings(m))
         return m, rep
 
     mesh = step(0, "read", do_read)
@@ -191,7 +251,8 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None):
     mesh = step(3, "orient", lambda: orient(mesh))
     mesh = step(4, "bind", lambda: bind(mesh, s.max_influences, s.unweighted))
     mesh = step(5, "parts", lambda: parts(mesh, s.parts, s.min_part_faces, s.parts_threshold))
-    mesh = step(6, "spheres", lambda: spheres(mesh))
+    # on the clips as the asset stores them (half-precision scales), so the spheres hold for it
+    mesh = step(6, "spheres", lambda: spheres(stored_clips(mesh)))
     return mesh, reports
 
 
@@ -216,6 +277,7 @@ def import_asset(src, out, settings: ImportSettings | None = None, progress=None
         "importer": f"colossus {__version__}", "reader": mesh.source.get("reader", ""),
         "sourceFrame": mesh.source.get("frame", ""),
         "settings": {k: ("" if v is None else v) for k, v in asdict(s).items()},
+        "meshes": mesh_provenance(mesh.source.get("mesh_info", [])),
     }
     mesh, rep = write(mesh, out, provenance)
     rep.seconds = time.perf_counter() - t1

@@ -228,12 +228,9 @@ def test_allocation_cap(work, monkeypatch):
 
 # ---------------------------------------------------------------------------------------------
 # Hostile input (issue 12): the minimal case of every bad-outcome class the fuzz campaign found
-# (tests/fuzz; `make fuzz`).  Classes whose fix belongs inside a reader that is being rewritten
-# (pipeline/readers/, issue 9) are strict xfails: they start passing, and must be un-marked,
-# when the reader is fixed.
+# (tests/fuzz; `make fuzz`), the reader-level ones (pipeline/readers/) included.
 CORPUS = ROOT.parent / "shared" / "corpus"
 CASES = ROOT / "tests" / "fuzz" / "cases"
-READER_OWNED = "fix belongs in pipeline/readers (being rewritten on issue9); fuzz class kept as a minimal case"
 
 
 def corpus_file(rel):
@@ -373,8 +370,8 @@ def test_glb_zero_scale_key_is_one_line(work, run_import):
             struct.pack_into("<3f", buf, start + k * stride, 0, 0, 0)
     src = _glb_with(work, "zeroscale.glb", edit)
     out = work / "o.usda"
-    assert_no_internal_error(run_import(src, out), out, "zeroscale.glb: clip 'bend' frame 0 (time 0): joint 'lower' has a "
-                                                        "transform that is not finite, not invertible")
+    assert_no_internal_error(run_import(src, out), out, "zeroscale.glb: animation 'bend': node 'lower': the "
+                                                        "scale key at 0 s is zero or degenerate (0, 0, 0)")
 
 
 def test_glb_huge_positions_no_warning(work, run_import):
@@ -386,7 +383,7 @@ def test_glb_huge_positions_no_warning(work, run_import):
             struct.pack_into("<3f", buf, start + k * stride, -3.4e38, -3.4e38, -3.4e38)
     src = _glb_with(work, "huge.glb", edit)
     out = work / "o.usda"
-    assert_no_internal_error(run_import(src, out), out, "huge.glb: 386 vertex position(s) are not finite or beyond")
+    assert_no_internal_error(run_import(src, out), out, "huge.glb: mesh 'Limb': vertex positions are not finite or beyond +-1e+12")
 
 
 def test_usd_zero_scale_animation_is_one_line(work, run_import):
@@ -400,21 +397,26 @@ def test_usd_zero_scale_animation_is_one_line(work, run_import):
         attr.Set(v, 3.0)  # its one time sample: every frame
     src = _edit_usd(work, zero)
     out = work / "o.usda"
-    assert_no_internal_error(run_import(src, out), out, "frame 0 (time 0): joint 'middle' has a transform that is not finite")
+    assert_no_internal_error(run_import(src, out), out, "animation 'bend': node 'middle': the scale key at 0.125 s is zero or degenerate (0, 0, 0)")
 
 
-def test_negative_frame_rate_is_one_line(work, run_import, colossus):
+def test_negative_frame_rate_is_ignored_or_one_line(work, run_import, colossus):
     """A Maya FBX whose header says CustomFrameRate -1 used to be written as an asset with
     framesPerSecond -1, which usd-core then refuses to open (the fuzz's 'validate: COL001 on the
-    written asset'); now one line pointing at --fps, and --fps imports it."""
+    written asset').  The scene reader ignores a non-positive declared rate and picks the grid
+    from the keys, so it imports and validates; a USD stage that declares one is one line."""
     src = corpus_file("realworld/ufbx_maya_game_sausage_7500_binary_combined.fbx")
     out = work / "o.usda"
-    assert_no_internal_error(run_import(src, out), out, "frame rate (-1) is not a positive number (give --fps)")
-    proc = run_import(src, out, "--fps", "24")
+    proc = run_import(src, out)
     assert proc.returncode == 0, proc.stderr
     proc = colossus("validate", out, "--format", "json")
     codes = {f["code"] for f in json.loads(proc.stdout)["assets"][0]["findings"]}
     assert proc.returncode in (0, 1) and not codes & {"COL001", "COL002"}, proc.stdout[-500:]
+    neg = work / "neg.usda"
+    neg.write_bytes(re.sub(rb"timeCodesPerSecond = [0-9.]+", b"timeCodesPerSecond = -1",
+                           (SAMPLES / "limb.usda").read_bytes()))
+    out.unlink()
+    assert_clean_failure(run_import(neg, out), out, "neg.usda: timeCodesPerSecond is -1")
 
 
 def test_summary_with_undefined_slack(work, run_import):
@@ -545,17 +547,13 @@ def test_validate_non_utf8_asset_is_col001(good_assets, tmp_path, validate_json)
     assert [f["code"] for f in rb["findings"]] == ["COL001"] and rg["passed"]
 
 
-# ---- reader-level classes: strict xfails until the reader rewrite (issue 9) fixes them -------
-@pytest.mark.xfail(strict=True, reason=READER_OWNED + ": usd_reader._open calls str() on a Tf.ErrorException "
-                   "whose text is not UTF-8 (UnicodeDecodeError); one_line() handles it")
+# ---- reader-level classes (pipeline/readers/), fixed after the issue-9 reader rewrite ---------
 def test_usda_non_utf8_is_one_line(work, run_import):
     src = _usda_with(work, "bytes.usda", lambda d: d[:d.index(b"def Mesh") + 4] + b"\xff" + d[d.index(b"def Mesh") + 4:])
     out = work / "o.usda"
     assert_no_internal_error(run_import(src, out), out, "bytes.usda")
 
 
-@pytest.mark.xfail(strict=True, reason=READER_OWNED + ": usd_reader._open cuts usd-core's message at 200 "
-                   "characters before one_line() can reduce 'Error in pxrInternal... : why' to its reason")
 def test_usda_parse_error_reduced_to_its_reason(work, run_import):
     src = _usda_with(work, "paren.usda", lambda d: d.replace(b"(", b"", 1))
     out = work / "o.usda"
@@ -564,8 +562,6 @@ def test_usda_parse_error_reduced_to_its_reason(work, run_import):
     assert "Error in 'pxr" not in proc.stderr
 
 
-@pytest.mark.xfail(strict=True, reason=READER_OWNED + ": usd_reader lets usd-core's Tf.ErrorException "
-                   "('Corrupt asset: exception thrown unpacking a value') escape")
 def test_usdc_undecodable_value_is_one_line(work, run_import):
     src = work / "undecodable.usdc"
     shutil.copy(CASES / "limb_undecodable_value.usdc", src)
@@ -573,8 +569,6 @@ def test_usdc_undecodable_value_is_one_line(work, run_import):
     assert_no_internal_error(run_import(src, out), out, "undecodable.usdc")
 
 
-@pytest.mark.xfail(strict=True, reason=READER_OWNED + ": assimp_reader concatenates bone weights of "
-                   "different dimensions (ValueError); a real corpus FBX, no mutation needed")
 def test_fbx_bone_weight_arrays(work, run_import):
     src = corpus_file("assimp/huesitos.fbx")
     out = work / "o.usda"
@@ -582,8 +576,6 @@ def test_fbx_bone_weight_arrays(work, run_import):
     assert "internal error" not in proc.stderr, proc.stderr
 
 
-@pytest.mark.xfail(strict=True, reason=READER_OWNED + ": assimp_reader decomposes node transforms "
-                   "(SVD) before checking they are finite (LinAlgError: SVD did not converge)")
 def test_dae_non_finite_node_matrix(work, run_import):
     data = corpus_file("assimp/library_animation_clips.dae").read_bytes()
     i = data.index(b"2.2799733224976824e-14 1.0 0.0 2.0")
@@ -593,8 +585,6 @@ def test_dae_non_finite_node_matrix(work, run_import):
     assert_no_internal_error(run_import(src, out), out, "matrix.dae")
 
 
-@pytest.mark.xfail(strict=True, reason=READER_OWNED + ": assimp_reader slerps zero quaternion keys "
-                   "(scipy ValueError: zero norm quaternions) instead of rejecting them")
 def test_glb_zero_rotation_keys(work, run_import):
     def edit(doc, buf, span):
         an = doc["animations"][0]
@@ -607,8 +597,6 @@ def test_glb_zero_rotation_keys(work, run_import):
     assert_no_internal_error(run_import(src, out), out, "zeroquat.glb")
 
 
-@pytest.mark.xfail(strict=True, reason=READER_OWNED + ": common.pack_influences casts float64 weight "
-                   "sums to float32 before checking them (RuntimeWarning: overflow encountered in cast)")
 def test_glb_huge_weights_no_warning(work, run_import):
     def edit(doc, buf, span):
         start, stride, count = span(doc["meshes"][0]["primitives"][0]["attributes"]["WEIGHTS_0"])

@@ -27,6 +27,7 @@ DEFAULT_OPTIONS = {
     "slack_ratio": tol.SLACK_RATIO,
     "chunk_frames": None,
     "clip_proofs": None,
+    "source": None,
 }
 
 
@@ -34,7 +35,8 @@ class Context:
     """Options shared by the rules of one asset, and the cached frame proof.
 
     Attributes: ``max_influences`` (int), ``subframes`` (int), ``slack_ratio`` (float),
-    ``chunk_frames`` (int or None: automatic), ``clip_proofs`` (proofs of the asset's clips
+    ``chunk_frames`` (int or None: automatic), ``source`` (the export the asset was made from, for
+    the COL6xx rules; None: they do not run), ``clip_proofs`` (proofs of the asset's clips
     already run elsewhere, e.g. one per clip on other workers, merged instead of proving again;
     see :mod:`validators.parallel`).
     """
@@ -55,7 +57,16 @@ class Context:
         self.slack_ratio = float(opts["slack_ratio"])
         self.chunk_frames = opts["chunk_frames"]
         self.clip_proofs = opts["clip_proofs"]
+        self.source = opts["source"]
         self._proof = None
+        self._source_check = None
+
+    def source_check(self):
+        """The comparison with the ``source`` export (:func:`validators.source.compare_source`), once."""
+        if self._source_check is None:
+            from .source import compare_source
+            self._source_check = compare_source(self.asset, self.source)
+        return self._source_check
 
     def proof(self):
         if self._proof is None:
