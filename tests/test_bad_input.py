@@ -605,3 +605,29 @@ def test_glb_huge_weights_no_warning(work, run_import):
     src = _glb_with(work, "weights.glb", edit)
     out = work / "o.usda"
     assert_no_internal_error(run_import(src, out), out, "weights.glb")
+
+
+def test_glb_signalling_nan_no_warning(work, run_import):
+    """Fuzz class 'RuntimeWarning: invalid value encountered in cast' (gltf_reader): a signalling
+    NaN among the float32 positions warned when widened to float64; now one line, counted."""
+    def edit(doc, buf, span):
+        start, stride, count = span(doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"])
+        struct.pack_into("<I", buf, start, 0x7F800001)  # sNaN
+    src = _glb_with(work, "snan.glb", edit)
+    out = work / "o.usda"
+    assert_no_internal_error(run_import(src, out), out, "snan.glb: mesh 'Limb' primitive 0 positions contain NaN "
+                                                        "or infinite values (1 affected)")
+
+
+def test_glb_json_of_the_wrong_type(work, run_import):
+    """Fuzz class 'internal error (TypeError: 'bool' object is not subscriptable)' (gltf_reader):
+    JSON values of the wrong type where the specification fixes an object or a number."""
+    def accessor_bool(doc, buf, span):
+        doc["accessors"][doc["animations"][0]["samplers"][0]["output"]] = True
+    def count_list(doc, buf, span):
+        doc["accessors"][doc["animations"][0]["samplers"][0]["input"]]["count"] = [1]
+    out = work / "o.usda"
+    src = _glb_with(work, "bool.glb", accessor_bool)
+    assert_no_internal_error(run_import(src, out), out, "bool.glb: animation 0 channel 0 output: accessors 6 is not a JSON object")
+    src = _glb_with(work, "count.glb", count_list)
+    assert_no_internal_error(run_import(src, out), out, "count.glb: malformed glTF (TypeError: ")

@@ -23,31 +23,6 @@ CI_SEED = 12
 CI_SUBPROCESS_EVERY = 40
 
 
-#: Bad-outcome classes whose fix belongs inside the readers being rewritten (``pipeline/readers``,
-#: issue 9), each kept as a strict xfail with its minimal case in test_bad_input.py.  The CI
-#: campaign tolerates them until then (and :func:`test_fuzz_campaign_all_classes` records that
-#: they still occur); delete a line when its reader is fixed.
-KNOWN_READER_CLASSES = (
-    "usd-core's raw error text",                     # usd_reader._open cuts the message before one_line
-    "internal error UnicodeDecodeError",             # usd_reader._open: str(Tf.ErrorException)
-    "internal error RuntimeError: : Corrupt asset",  # usd_reader: usd-core's value errors escape
-    "internal error RuntimeError: : Failed to decompress data",  # (the same, a crate section)
-    "internal error ErrorException",                 # (the same, when the exception class survives)
-    "internal error ValueError: : all the input arrays must have same number of dimensions",  # assimp_reader
-    "internal error ValueError: : Found zero norm quaternions",  # assimp_reader slerps zero keys
-    "internal error LinAlgError",                    # assimp_reader: SVD/solve on non-finite or singular nodes
-    "Python warning RuntimeWarning",                 # assimp_reader/common: casts and products before checks
-)
-#: ... warnings count as reader-level only when they come from these modules.
-READER_MODULES = ("assimp_reader.py", "usd_reader.py", "common.py", "fbx_header.py")
-
-
-def _known(cls):
-    if not cls.startswith("import") or not any(k in cls for k in KNOWN_READER_CLASSES):
-        return False
-    return "Python warning" not in cls or any(f"[in {m}]" in cls for m in READER_MODULES)
-
-
 @pytest.fixture(scope="module")
 def ci_campaign():
     s = campaign(n=CI_CASES, seed=CI_SEED, jobs=min(2, os.cpu_count() or 1), timeout=120,
@@ -62,15 +37,8 @@ def test_fuzz_campaign(ci_campaign):
     assert s.subprocess_cases >= 4
     exts = {k.split()[1] for k in s.by_format}
     assert {".glb", ".fbx", ".usda", ".usdc"} <= exts, exts
-    unknown = {c: len(r) for c, r in s.bad.items() if not _known(c)}
-    assert not unknown, "bad outcomes (replay one with python -m tests.fuzz --seed %d --start INDEX -n 1):\n%s" % (
+    assert s.bad_count == 0, "bad outcomes (replay one with python -m tests.fuzz --seed %d --start INDEX -n 1):\n%s" % (
         CI_SEED, s.render())
-
-
-@pytest.mark.xfail(strict=True, reason="reader-level fuzz classes remain until the reader rewrite (issue 9) "
-                   "lands: KNOWN_READER_CLASSES")
-def test_fuzz_campaign_all_classes(ci_campaign):
-    assert ci_campaign.bad_count == 0, ci_campaign.render()
 
 
 def test_mutations_are_deterministic():
