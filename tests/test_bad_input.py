@@ -631,3 +631,25 @@ def test_glb_json_of_the_wrong_type(work, run_import):
     assert_no_internal_error(run_import(src, out), out, "bool.glb: animation 0 channel 0 output: accessors 6 is not a JSON object")
     src = _glb_with(work, "count.glb", count_list)
     assert_no_internal_error(run_import(src, out), out, "count.glb: malformed glTF (TypeError: ")
+
+
+def test_gltf_negative_accessor_count(work, run_import):
+    """Fuzz class 'internal error (ValueError: cannot reshape array ...)' (gltf_reader): an
+    accessor whose count is negative."""
+    def edit(doc, buf, span):
+        doc["accessors"][doc["animations"][0]["samplers"][0]["input"]]["count"] = -1
+    src = _glb_with(work, "count.glb", edit)
+    out = work / "o.usda"
+    assert_no_internal_error(run_import(src, out), out, "count.glb: animation 0 channel 0 input: accessor ")
+    assert "negative count (-1)" in run_import(src, out).stderr
+
+
+def test_gltf_buffer_view_without_buffer(work, run_import):
+    """Fuzz class 'internal error (TypeError: '<=' not supported ...)' (gltf_reader): a buffer
+    view whose buffer is null."""
+    def edit(doc, buf, span):
+        for bv in doc["bufferViews"]:
+            bv["buffer"] = None
+    src = _glb_with(work, "nobuf.glb", edit)
+    out = work / "o.usda"
+    assert_no_internal_error(run_import(src, out), out, "names a missing buffer")

@@ -122,7 +122,8 @@ class _File:
 
     def _view(self, bv_index, dtype, width, count, offset, what):
         bv = self.item("bufferViews", bv_index, what)
-        buf = self.buffers[bv.get("buffer", 0)] if 0 <= bv.get("buffer", 0) < len(self.buffers) else None
+        b = bv.get("buffer", 0)
+        buf = self.buffers[b] if isinstance(b, int) and 0 <= b < len(self.buffers) else None
         if buf is None:
             raise InputError(self.path, f"{what}: buffer view {bv_index} names a missing buffer")
         item = np.dtype(dtype).itemsize * width
@@ -149,6 +150,8 @@ class _File:
             count = int(a["count"])
         except KeyError as exc:
             raise InputError(self.path, f"{what}: accessor {i} has a bad or missing {exc}") from None
+        if count < 0:
+            raise InputError(self.path, f"{what}: accessor {i} has a negative count ({count})")
         if "bufferView" in a:
             out = self._view(a["bufferView"], dtype, width, count, a.get("byteOffset", 0), what)
         else:
