@@ -365,9 +365,12 @@ class LoadedAsset:
     def skel_transforms(self, local: np.ndarray) -> np.ndarray:
         """Compose ``(f, b, 4, 4)`` joint-local transforms into skeleton space (parents first)."""
         out = np.empty_like(local)
-        for j in schema.parents_first(self.parents):
-            p = self.parents[j]
-            out[:, j] = local[:, j] if p < 0 else out[:, p] @ local[:, j]
+        # a corrupt asset's huge values overflow to inf / NaN here: the clip rules report them
+        # (COL503), the composition must not warn
+        with np.errstate(invalid="ignore", over="ignore"):
+            for j in schema.parents_first(self.parents):
+                p = self.parents[j]
+                out[:, j] = local[:, j] if p < 0 else out[:, p] @ local[:, j]
         return out
 
     # -- readiness -------------------------------------------------------------------------
