@@ -5,7 +5,7 @@ PY      := $(VENV)/bin/python
 STAMP   := $(VENV)/.installed
 OUT     := out
 
-.PHONY: setup demo test bench samples clean
+.PHONY: setup demo test bench fuzz samples clean
 
 setup: $(STAMP)
 
@@ -29,6 +29,15 @@ test: setup
 bench: setup
 	$(VENV)/bin/colossus bench
 
+# A long fuzz campaign over every seed format (samples/ and ../shared/corpus/; seeds up to
+# MAX_SEED bytes, 0 for all of them); every bad case is saved under $(FUZZ_OUT)/ with its recipe
+# (python -m tests.fuzz --replay $(FUZZ_OUT)).
+N        ?= 10000
+FUZZ_OUT ?= fuzz-cases
+MAX_SEED ?= 1e6
+fuzz: setup
+	$(PY) -m tests.fuzz -n $(N) --max-seed-bytes $(MAX_SEED) --out $(FUZZ_OUT)
+
 # Regenerate the Blender samples with bpy (CPython 3.11 only, in its own venv).
 samples:
 	@set -e; py=$$(tools/find-python 11 11); \
@@ -37,4 +46,4 @@ samples:
 	  .venv-bpy/bin/python samples/make_samples.py
 
 clean:
-	rm -rf $(OUT) .pytest_cache
+	rm -rf $(OUT) .pytest_cache fuzz-cases

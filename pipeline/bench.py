@@ -28,6 +28,8 @@ def bench_import(triangles=200_000, bones=60, clips=2, frames=120, echo=print):
     """Import a synthetic skinned tube (a real .glb); ratio of the whole import to assimp's load alone."""
     import assimp_py
 
+    from .isolation import read_isolated
+    from .readers import read
     from .readers.assimp_reader import _flags
     from .run import import_asset
     from .synth.glb import write_glb
@@ -40,13 +42,19 @@ def bench_import(triangles=200_000, bones=60, clips=2, frames=120, echo=print):
         src = os.path.join(tmp, "bench.glb")
         nv, nf = write_glb(src, triangles, bones, clips, frames)
         t_assimp, _ = _best(lambda: assimp_py.import_file(src, _flags()), 3)
+        t_read, _ = _best(lambda: read(src), 3)
+        t_contained, _ = _best(lambda: read_isolated(src), 3)
         t_import, res = _best(lambda: import_asset(src, os.path.join(tmp, "bench.usda")), 1)
     echo(f"import: {nf} triangles, {nv} vertices, {bones} bones, {clips} clips x {frames} frames")
     echo(f"  assimp load alone            {t_assimp:8.3f} s")
+    echo(f"  reader in this process       {t_read:8.3f} s")
+    echo(f"  reader contained (forked)    {t_contained:8.3f} s   = +{t_contained - t_read:.3f} s per file to survive "
+         "a native crash (goal: < 0.2 s)")
     echo(f"  whole import (all stages)    {t_import:8.3f} s   = {t_import / t_assimp:6.1f} x assimp's load   (goal: < 10 s)")
     for rep in res.reports:
         echo(f"    {rep.stage:<8} {rep.seconds:8.3f} s")
     return {"triangles": nf, "assimp_s": t_assimp, "import_s": t_import, "ratio": t_import / t_assimp,
+            "read_s": t_read, "read_contained_s": t_contained,
             "stages": {r.stage: r.seconds for r in res.reports}}
 
 

@@ -15,6 +15,12 @@ from .tolerances import PARTS_ANY_THRESHOLD
 LARGE_INPUT_BYTES = 4 * 2**20  # show a progress bar from this input size on (when stderr is a terminal)
 
 
+def _num(value, spec: str) -> str:
+    """``format(value, spec)``, or ``n/a`` for a figure a degenerate input leaves undefined
+    (a part whose vertices all coincide has no slack ratio)."""
+    return "n/a" if value is None else format(value, spec)
+
+
 def _stage_line(rep) -> str:
     c = rep.counts
     s = rep.stage
@@ -39,7 +45,7 @@ def _stage_line(rep) -> str:
     if s == "parts":
         return f"{c['parts']} parts ({c['mode']}), {len(c.get('folded_joints', []))} joints folded"
     if s == "spheres":
-        return f"max radius {c['max_radius']:.4g}, max slack x{c['max_slack_ratio']:.3f}"
+        return f"max radius {_num(c['max_radius'], '.4g')}, max slack x{_num(c['max_slack_ratio'], '.3f')}"
     if s == "write":
         return f"{c['path']} ({c['bytes']} bytes)"
     return ""
@@ -65,7 +71,7 @@ def format_summary(result) -> str:
         for i, p in enumerate(parts):
             g = p.get("growth", 0.0)
             lines.append(f"  {i:>4} {str(p.get('joint'))[:20]:<20} {int(faces[i + 1] - faces[i]):>6} "
-                         f"{p.get('vertices', 0):>8} {p.get('radius', 0):>10.4g} {p.get('slack_ratio', float('nan')):>7.3f} "
+                         f"{p.get('vertices', 0):>8} {_num(p.get('radius'), '.4g'):>10} {_num(p.get('slack_ratio'), '.3f'):>7} "
                          f"{g / p['radius'] if p.get('radius') else 0.0:>9.2%}")
         lines.append("  (radius in joint space; slack = radius / tightest per-frame sphere; growth = how much of "
                      "the radius covers motion between frames beyond the frames' minimal sphere)")

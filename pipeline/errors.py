@@ -19,7 +19,7 @@ class InputError(ColossusError):
 
     def __init__(self, path, problem: str):
         self.path = str(path) if path is not None else None
-        self.problem = one_line(problem, limit=400)  # force one line, of readable length
+        self.problem = one_line(problem, limit=300)  # force one line, of readable length
         super().__init__(f"{self.path}: {self.problem}" if self.path else self.problem)
 
 

@@ -7,10 +7,12 @@ import os
 import time
 from dataclasses import asdict, dataclass, field
 
+import numpy as np
+
 from . import __version__
 from .errors import InputError, UsageError
 from .model import SkinnedMesh
-from .readers import read
+from .isolation import read_isolated
 from .stages import StageReport
 from .stages.bake import bake
 from .stages.bind import UNWEIGHTED_POLICIES, bind
@@ -19,7 +21,8 @@ from .stages.parts import parts
 from .stages.spheres import spheres
 from .stages.weld import weld
 from .stages.write import check_output_path, stored_clips, write
-from .tolerances import PARTS_ANY_THRESHOLD, RESAMPLING_RELATIVE
+from .tolerances import LARGEST_COORDINATE, PARTS_ANY_THRESHOLD, RESAMPLING_RELATIVE
+from .xforms import degenerate
 
 STAGES = ("read", "bake", "weld", "orient", "bind", "parts", "spheres", "write")
 
@@ -108,6 +111,45 @@ def sha256_of(path) -> str:
     return h.hexdigest()
 
 
+def check_read(mesh: SkinnedMesh, src) -> None:
+    """What every stage assumes of a reader's result, checked once for every reader: faces,
+    finite positions and weights, in-range joint indices, a positive frame rate, and finite,
+    invertible bind and animated joint transforms.  Raises :class:`InputError` naming the file
+    (a corrupt or hostile file otherwise ends in a singular-matrix failure or NaN warnings
+    several stages later)."""
+    m = mesh
+    if m.face_count == 0:
+        raise InputError(src, "the skinned mesh has no faces")
+    with np.errstate(invalid="ignore"):
+        off = ~(np.abs(m.positions) <= LARGEST_COORDINATE).all(axis=1)  # NaN counts too
+    if off.any():
+        raise InputError(src, f"{int(off.sum())} vertex position(s) are not finite or beyond +-{LARGEST_COORDINATE:g} "
+                              "(float32 skinning would overflow)")
+    w = m.joint_weights
+    if not np.isfinite(w).all() or (w < 0).any():
+        raise InputError(src, "skin weights are negative or not finite")
+    ji = m.joint_indices
+    if len(ji) and m.joint_count and (ji.min() < 0 or ji.max() >= m.joint_count):
+        raise InputError(src, f"skin joint index out of range for {m.joint_count} joints")
+    fps = m.time_codes_per_second
+    if not (np.isfinite(fps) and fps > 0):
+        raise InputError(src, f"the file's frame rate ({fps:g}) is not a positive number (give --fps)")
+    for what, mats in (("geometry bind transform", m.geom_bind[None]), ("bind transform", m.bind_transforms),
+                       ("rest transform", m.rest_transforms)):
+        bad = np.flatnonzero(degenerate(mats))
+        if len(bad):
+            who = f" of joint {m.joint_names[bad[0]]!r}" if what != "geometry bind transform" else ""
+            raise InputError(src, f"the {what}{who} is not finite, not invertible (zero scale?) or huge")
+    for c in m.clips:
+        if not np.isfinite(c.times).all():
+            raise InputError(src, f"clip {c.name!r} has non-finite time codes")
+        bad = np.argwhere(degenerate(c.local))
+        if len(bad):
+            f, j = bad[0]
+            raise InputError(src, f"clip {c.name!r} frame {f} (time {c.times[f]:g}): joint {m.joint_names[j]!r} has a "
+                                  "transform that is not finite, not invertible (zero scale?) or huge")
+
+
 def read_warnings(m: SkinnedMesh) -> list:
     """The reader's findings worth a warning line: its notes, morph targets not carried, clips
     whose resampling off the source's keys errs more than the tolerance, no clip at all."""
@@ -150,13 +192,15 @@ def settings_from_provenance(settings: dict) -> ImportSettings:
 
 def read_baked(src, settings: ImportSettings | None = None) -> SkinnedMesh:
     """The source read and baked into the output convention exactly as ``import`` does (before
-    welding and rounding): what ``colossus validate --source`` compares an asset with."""
+    welding and rounding): what ``colossus validate --source`` compares an asset with.  Read in
+    a contained child and checked like import's read, so a hostile source is one InputError."""
     s = settings or ImportSettings()
     s.check()
-    m = read(src, meshes=s.meshes or None, fps=s.fps)
+    m = read_isolated(src, meshes=s.meshes or None, fps=s.fps)
     if s.source_up_axis or s.source_meters_per_unit:
         m = m.replace(up_axis=s.source_up_axis or m.up_axis,
                       meters_per_unit=s.source_meters_per_unit or m.meters_per_unit)
+    check_read(m, src)
     return bake(m, s.up_axis, s.meters_per_unit)[0]
 
 
@@ -180,13 +224,12 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None):
         return out[0]
 
     def do_read():
-        m = read(src, meshes=s.meshes or None, fps=s.fps)
+        m = read_isolated(src, meshes=s.meshes or None, fps=s.fps)  # a native crash: one InputError
         if s.source_up_axis or s.source_meters_per_unit:
             m = m.replace(up_axis=s.source_up_axis or m.up_axis,
                           meters_per_unit=s.source_meters_per_unit or m.meters_per_unit)
         m = m.replace(source={**m.source, "path": os.fspath(src)})
-        if m.face_count == 0:
-            raise InputError(src, "the skinned mesh has no faces")
+        check_read(m, src)
         info = m.source.get("mesh_info", [])
         rep = StageReport("read", counts={
             "vertices": m.vertex_count, "faces": m.face_count, "joints": m.joint_count,

@@ -33,6 +33,14 @@ RESAMPLING_RELATIVE = 1e-3
 ALLOC_FACTOR = 400
 #: ... plus this many bytes, so that tiny files still import.
 ALLOC_FLOOR = 256 * 1024 * 1024
+#: Largest coordinate (absolute, source units) a vertex or a transform entry may have: float32
+#: skinning of points near float32's limit (3.4e38) overflows to inf and NaN.  Real scenes are
+#: below 1e8 even in millimetres.
+LARGEST_COORDINATE = 1e12
+#: A linear map whose columns are this much shorter than its longest one, or this far from
+#: independent (``|det| / product of column lengths``), is degenerate: inverting it (every stage
+#: maps points into joint space) gives garbage or fails.  Real rigs are nowhere near.
+DEGENERATE_RATIO = 1e-6
 
 
 def model_scale(points: np.ndarray) -> float:

@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .tolerances import DEGENERATE_RATIO, LARGEST_COORDINATE
+
 AXES = ("Y", "Z")
 
 
@@ -88,6 +90,24 @@ def decompose_trs(m: np.ndarray):
     # Re-derive the scale along the rotation's own axes: s_i = (R^T A)_ii
     s = np.einsum("...ji,...ji->...i", rot, a)
     return m[..., :3, 3].copy(), matrix_to_quat(rot), s
+
+
+def degenerate(m: np.ndarray) -> np.ndarray:
+    """Which of the transforms ``m`` (..., 4, 4) float64 are not finite, have an entry beyond
+    :data:`~pipeline.tolerances.LARGEST_COORDINATE` or a degenerate 3x3 part (a column shorter
+    than :data:`~pipeline.tolerances.DEGENERATE_RATIO` x the longest, or columns that far from
+    independent): a bool array of shape ``m.shape[:-2]``.  Inverting such a transform (every
+    stage maps points into joint space) fails or gives garbage; never warns."""
+    m = np.asarray(m, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        bounded = (np.abs(m) <= LARGEST_COORDINATE).all(axis=(-2, -1))  # False for NaN too
+    a = np.where(bounded[..., None, None], m[..., :3, :3], 0.0)
+    with np.errstate(all="ignore"):
+        cols = np.linalg.norm(a, axis=-2)
+        longest = cols.max(axis=-1)
+        det = np.abs(np.linalg.det(a))
+        bad = (cols.min(axis=-1) <= DEGENERATE_RATIO * longest) | (det <= DEGENERATE_RATIO * cols.prod(axis=-1))
+    return ~bounded | bad | (longest == 0)
 
 
 def apply_points(m: np.ndarray, p: np.ndarray) -> np.ndarray:

@@ -55,6 +55,16 @@ class Clip:
     joints: list
 
 
+def _bad_values(attr: str, vals: np.ndarray) -> np.ndarray:
+    """``(n, A)`` bool: which joint values of ``(n, A, w)`` samples are not finite (or, for
+    rotations, a zero quaternion)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        bad = ~np.isfinite(vals).all(axis=-1)
+        if attr == "rotations":
+            bad |= ~(np.linalg.norm(vals, axis=-1) >= 1e-12)
+    return bad
+
+
 def open_stage(path: str) -> Usd.Stage:
     """Open ``path`` fresh (reloading a layer usd-core already holds), raising on failure."""
     layer = Sdf.Layer.Find(path)
@@ -271,6 +281,59 @@ class LoadedAsset:
         offsets, verts = schema.part_vertex_csr(self.tris, self.part_offsets, self.part_faces, self.n)
         return offsets, verts.astype(np.int32)
 
+    @cached_property
+    def clip_sample_issues(self) -> dict:
+        """Every clip's malformed time samples: ``{clip name: [issue, ...]}`` where an issue is
+        ``(attr, time, kind, detail)``, ``kind`` ``"length"`` (``detail``: the number of entries,
+        not one per clip joint) or ``"nonfinite"`` (``detail``: the first bad joint's name), at
+        most one of each kind per attribute.
+
+        A well-formed clip is judged on :meth:`clip_data` (read once, shared with the frame
+        proof); only a malformed one is scanned sample by sample to say where: ``UsdSkel``
+        silently poses a sample of the wrong length at identity, so the rules must find it at
+        any sample, not only the first.  A value usd-core cannot decode raises
+        ``Tf.ErrorException`` (the runner makes it a ``COL001``)."""
+        out = {}
+        for c in self.clips:
+            try:
+                d = self.clip_data(c)
+            except ColliderError:
+                out[c.name] = self._scan_samples(c)
+                continue
+            issues = []
+            for a, times, vals in (("translations", d.tt, d.vt), ("rotations", d.tr, d.vr), ("scales", d.ts, d.vs)):
+                bad = _bad_values(a, vals)
+                if bad.any():
+                    i, j = np.argwhere(bad)[0]
+                    issues.append((a, float(times[i]), "nonfinite", self.joints[d.anim_to_skel[j]]))
+            out[c.name] = issues
+        return out
+
+    def _scan_samples(self, c: Clip) -> list:
+        issues = []
+        for a in CLIP_ATTRS:
+            attr = c.prim.GetAttribute(a)
+            if not attr:
+                continue
+            seen = set()
+            for t in attr.GetTimeSamples():
+                v = attr.Get(Usd.TimeCode(t))
+                if v is None:
+                    continue
+                arr = np.array(v, dtype=np.float64)  # quaternions come as (x, y, z, w): fine here
+                if "length" not in seen and len(arr) != len(c.joints):
+                    issues.append((a, float(t), "length", len(arr)))
+                    seen.add("length")
+                if "nonfinite" not in seen and arr.size:
+                    bad = _bad_values(a, arr.reshape(1, len(arr), -1))[0]
+                    if np.any(bad):
+                        j = int(np.argmax(bad))
+                        issues.append((a, float(t), "nonfinite", c.joints[j] if j < len(c.joints) else None))
+                        seen.add("nonfinite")
+                if len(seen) == 2:
+                    break
+        return issues
+
     def anim_local(self, clip: Clip, times) -> np.ndarray:
         """(f, b, 4, 4) joint-local transforms of ``clip`` at ``times`` in skeleton joint order,
         evaluated by ``UsdSkel.AnimQuery`` (its interpolation between samples; joints the clip
@@ -302,9 +365,12 @@ class LoadedAsset:
     def skel_transforms(self, local: np.ndarray) -> np.ndarray:
         """Compose ``(f, b, 4, 4)`` joint-local transforms into skeleton space (parents first)."""
         out = np.empty_like(local)
-        for j in schema.parents_first(self.parents):
-            p = self.parents[j]
-            out[:, j] = local[:, j] if p < 0 else out[:, p] @ local[:, j]
+        # a corrupt asset's huge values overflow to inf / NaN here: the clip rules report them
+        # (COL503), the composition must not warn
+        with np.errstate(invalid="ignore", over="ignore"):
+            for j in schema.parents_first(self.parents):
+                p = self.parents[j]
+                out[:, j] = local[:, j] if p < 0 else out[:, p] @ local[:, j]
         return out
 
     # -- readiness -------------------------------------------------------------------------

@@ -28,10 +28,11 @@ import json
 import os
 from dataclasses import dataclass, field
 
-from pipeline.engine import Engine, Progress, Task, crash_hook, expand_inputs, make_backend
+from pipeline.engine import Engine, InlineBackend, Progress, Task, crash_hook, expand_inputs, make_backend
+from pipeline.isolation import ChildFailed, contained
 from pipeline.readers import USD_EXTENSIONS
 
-from .runner import _crash_report, check_asset
+from .runner import OPEN_FAILED, READ_FAILED, _crash_report, check_asset, unreadable_report
 
 #: Assets at least this large (bytes on disk) are split by clip across workers.
 SPLIT_BYTES = 64 * 2**20
@@ -44,6 +45,72 @@ PROOF_RULES = ("COL403", "COL404", "COL407")
 def unit_check(path, kw):
     crash_hook(path)
     return check_asset(path, **kw)
+
+
+#: Seconds the contained read of one crate asset may take (``--jobs 1``; see :func:`unit_check_contained`).
+PROBE_TIMEOUT = 600.0
+
+
+def is_crate(path) -> bool:
+    """Whether ``path`` holds binary crate data (``.usdc``, ``.usdz``, or a ``.usd`` in crate form)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+    except OSError:
+        return False
+    return head == b"PXR-USDC" or head[:4] == b"PK\x03\x04"
+
+
+def _probe(path):
+    """Read everything of the asset that usd-core decodes natively: the stage, the arrays
+    :class:`validators.asset.LoadedAsset` reads, and every time sample of every clip (crate
+    values are decoded lazily, on first read).  Returns None, or the ``COL001`` message of
+    :func:`check_asset` when the asset cannot be opened or read (so it is not read twice)."""
+    from pipeline.errors import one_line
+
+    from .asset import CLIP_ATTRS, LoadedAsset, open_stage
+    try:
+        stage = open_stage(path)
+    except Exception as e:
+        return OPEN_FAILED.format(one_line(e))
+    try:
+        asset = LoadedAsset(stage, path)
+    except Exception as e:
+        return READ_FAILED.format(one_line(e))
+    try:
+        for clip in asset.clips:
+            for name in CLIP_ATTRS:
+                attr = clip.prim.GetAttribute(name)
+                if attr:
+                    for t in clip.times:
+                        attr.Get(float(t))
+    except Exception:
+        pass  # the rules report undecodable values (COL001) along with everything else
+    return None
+
+
+def unit_check_contained(path, kw):
+    """``--jobs 1``: :func:`unit_check`, after a contained read of a crate asset.
+
+    usd-core decodes a crate file (LZ4, compressed integers, offsets) in C++ in this process; a
+    hostile one can crash it natively, which would end the whole run with no report.  So a crate
+    asset is first read in a forked child (:func:`pipeline.isolation.contained`): if that child
+    dies, the asset gets a ``COL001`` finding and the other assets are still checked; if it
+    lives, the asset is checked here as usual (one that cannot even be opened gets the report
+    :func:`check_asset` would give, without being read again: a corrupt crate can make usd-core
+    allocate gigabytes before it gives up).  Text assets (``.usda``) are parsed completely when
+    opened, by a parser that has not been seen to crash, and are not read twice.  With
+    ``--jobs > 1`` the worker processes are the containment (the engine retries, then reports).
+    """
+    if is_crate(path) and os.access(path, os.R_OK):
+        try:
+            message = contained(_probe, path, path=path, timeout=PROBE_TIMEOUT)
+        except ChildFailed as e:
+            what = "reading it took too long" if e.timed_out else f"usd-core crashed reading it ({e})"
+            return _crash_report(path, what, kw)
+        if message is not None:  # cannot be opened or read: the same report check_asset gives
+            return unreadable_report(path, message, **kw)
+    return unit_check(path, kw)
 
 
 def unit_plan(path, kw):
@@ -122,8 +189,10 @@ def check_many(paths, jobs=1, scheduler=None, progress=False, split_bytes=SPLIT_
             finish(i, _crash_report(assets[i], e, kw))
         return f
 
+    unit = unit_check_contained if isinstance(backend, InlineBackend) else unit_check
+
     def check_task(i):
-        return Task(unit_check, (assets[i], kw), lambda rep: finish(i, rep), lost(i), lost(i))
+        return Task(unit, (assets[i], kw), lambda rep: finish(i, rep), lost(i), lost(i))
 
     def split_task(i):
         path = assets[i]

@@ -7,7 +7,7 @@ import time
 import traceback
 from pathlib import Path
 
-from pxr import Usd
+from pxr import Tf, Usd
 
 from pipeline.errors import one_line
 
@@ -15,6 +15,10 @@ from . import tolerances as tol
 from .asset import LoadedAsset, open_stage
 from .findings import SEVERITIES, AssetReport, Finding
 from .registry import RuleSelector, get_rule
+
+#: COL001 messages of an asset usd-core cannot open, and of one whose prims cannot be read.
+OPEN_FAILED = "usd-core cannot open the asset: {}"
+READ_FAILED = "the asset could not be read: {}"
 
 DEFAULT_OPTIONS = {
     "max_influences": tol.MAX_INFLUENCES,
@@ -132,21 +136,30 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
         try:
             stage = open_stage(path)
         except Exception as e:  # usd-core raises Tf.ErrorException and friends
-            add("COL001", f"usd-core cannot open the asset: {one_line(e)}")
+            add("COL001", OPEN_FAILED.format(one_line(e)))
             report.sort()
             return report
     try:
         asset = LoadedAsset(stage, path)
     except Exception as e:
-        add("COL001", f"the asset could not be read: {one_line(e)}")
+        add("COL001", READ_FAILED.format(one_line(e)))
         report.sort()
         return report
     ctx = Context(asset, **options)
     t_load = time.perf_counter() - t0
+    def undecodable(code, e):  # usd-core cannot decode what is read: a corrupt asset, not a rule bug
+        if not any(f.code == "COL001" for f in report.findings):
+            add("COL001", f"usd-core cannot read the asset's values (needed by {code}): {one_line(e)}")
+
     for rule in selector.rules():
         if rule.func is None:
             continue
-        blocked = next((asset.ready(n)[1] for n in rule.needs if not asset.ready(n)[0]), None)
+        try:  # readiness reads values too (every clip sample, for the frame proof)
+            blocked = next((asset.ready(n)[1] for n in rule.needs if not asset.ready(n)[0]), None)
+        except Tf.ErrorException as e:
+            undecodable(rule.code, e)
+            report.skipped[rule.code] = "usd-core cannot read what it needs"
+            continue
         if blocked is not None:
             report.skipped[rule.code] = blocked
             continue
@@ -157,11 +170,25 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
                 report.findings.append(Finding(rule.code, sev, h["message"], rule.name,
                                                {k: v for k, v in h["location"].items() if v is not None},
                                                h["sort_key"]))
+        except Tf.ErrorException as e:
+            undecodable(rule.code, e)
         except Exception as e:
             tb = traceback.extract_tb(e.__traceback__)[-1]
             add("COL002", f"rule {rule.code} ({rule.name}) crashed: {type(e).__name__}: {one_line(e)} "
                           f"[{Path(tb.filename).name}:{tb.lineno}]", validator=rule.code)
     report.stats = _stats(asset, ctx, t_load, time.perf_counter() - t0)
+    report.sort()
+    return report
+
+
+def unreadable_report(path, message: str, select=None, ignore=None, severities=None, **options) -> AssetReport:
+    """The report :func:`check_asset` gives an asset it cannot open or read (``message``: its
+    ``COL001``, :data:`OPEN_FAILED` or :data:`READ_FAILED`), for a caller that already tried to
+    read it elsewhere (``validators.parallel``'s contained read) and need not read it twice."""
+    selector = RuleSelector(select, ignore)
+    report = AssetReport(os.fspath(path))
+    if selector.enabled("COL001"):
+        report.findings.append(_finding("COL001", message, severities))
     report.sort()
     return report
 
@@ -194,7 +221,10 @@ def _stats(asset, ctx, t_load, t_total) -> dict:
     if ctx._proof is not None:
         s["frameproof"] = ctx._proof.stats()
     else:
-        ok, why = asset.ready("proof")
+        try:
+            ok, why = asset.ready("proof")
+        except Tf.ErrorException:
+            ok, why = False, "usd-core cannot read the asset's values"
         s["frameproof"] = {"checked": [], "not_checked": [
             "the frame proof did not run: " + (why if not ok else "COL403/COL404/COL407 not selected")]}
     return s

@@ -125,5 +125,5 @@ def clip_name(raw: str, taken: set) -> str:
 
 def check_finite(path, what: str, arr: np.ndarray) -> None:
     if not np.all(np.isfinite(arr)):
-        bad = int(np.count_nonzero(~np.isfinite(np.asarray(arr).reshape(len(arr), -1)).any(axis=1))) if len(arr) else 0
+        bad = int(np.count_nonzero((~np.isfinite(np.asarray(arr).reshape(len(arr), -1))).any(axis=1))) if len(arr) else 0
         raise InputError(path, f"{what} contain NaN or infinite values ({bad} affected)")

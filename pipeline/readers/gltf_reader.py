@@ -30,7 +30,7 @@ import struct
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, one_line
 from ..xforms import compose_trs
 from .common import AllocationBudget, check_finite, check_input_file
 from .scene import Animation, Channel, Scene, SceneMesh, Skin, build
@@ -114,13 +114,16 @@ class _File:
 
     def item(self, key, i, what):
         arr = self.list(key)
-        if not isinstance(i, int) or not 0 <= i < len(arr):
+        if not isinstance(i, int) or isinstance(i, bool) or not 0 <= i < len(arr):
             raise InputError(self.path, f"{what}: {key} index {i!r} out of range ({len(arr)} {key})")
+        if not isinstance(arr[i], dict):
+            raise InputError(self.path, f"{what}: {key} {i} is not a JSON object")
         return arr[i]
 
     def _view(self, bv_index, dtype, width, count, offset, what):
         bv = self.item("bufferViews", bv_index, what)
-        buf = self.buffers[bv.get("buffer", 0)] if 0 <= bv.get("buffer", 0) < len(self.buffers) else None
+        b = bv.get("buffer", 0)
+        buf = self.buffers[b] if isinstance(b, int) and 0 <= b < len(self.buffers) else None
         if buf is None:
             raise InputError(self.path, f"{what}: buffer view {bv_index} names a missing buffer")
         item = np.dtype(dtype).itemsize * width
@@ -147,6 +150,8 @@ class _File:
             count = int(a["count"])
         except KeyError as exc:
             raise InputError(self.path, f"{what}: accessor {i} has a bad or missing {exc}") from None
+        if count < 0:
+            raise InputError(self.path, f"{what}: accessor {i} has a negative count ({count})")
         if "bufferView" in a:
             out = self._view(a["bufferView"], dtype, width, count, a.get("byteOffset", 0), what)
         else:
@@ -165,7 +170,8 @@ class _File:
             info = np.iinfo(dtype)
             f = out.astype(np.float64) / info.max
             return np.maximum(f, -1.0) if info.min < 0 else f
-        return out.astype(np.float64) if dtype == np.float32 else out
+        with np.errstate(invalid="ignore"):  # signalling NaNs of a corrupt file: check_scene reports them
+            return out.astype(np.float64) if dtype == np.float32 else out
 
 
 def _node_matrix(n) -> np.ndarray:
@@ -390,7 +396,12 @@ def read_gltf(path, meshes=None, fps=None):
     size = check_input_file(path)
     budget = AllocationBudget(path, size)
     ext = os.path.splitext(path)[1].lower()
-    scene = read_scene(path, budget)
+    try:
+        scene = read_scene(path, budget)
+    except (TypeError, KeyError, AttributeError, IndexError, ValueError, OverflowError) as exc:
+        # the JSON's values are of the wrong type or shape where the specification fixes them
+        # (a number where an object belongs, a missing required property): a malformed file
+        raise InputError(path, f"malformed glTF ({type(exc).__name__}: {one_line(exc, 120)})") from None
     mesh = build(scene, path, meshes=meshes, fps=fps, budget=budget,
                  source={"file": os.path.basename(path), "format": ext.lstrip("."), "reader": "gltf",
                          "frame": "glTF: Y-up metres by specification"})

@@ -32,8 +32,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..model import Clip, SkinnedMesh
-from ..tolerances import GRID_KEY_FRAMES, SOURCE_WEIGHT_SUM, model_scale
-from ..xforms import compose_trs, decompose_trs, slerp
+from ..tolerances import DEGENERATE_RATIO, GRID_KEY_FRAMES, LARGEST_COORDINATE, SOURCE_WEIGHT_SUM, model_scale
+from ..xforms import compose_trs, decompose_trs, degenerate, slerp
 from .common import pack_influences
 
 #: Frame rates tried, in order, for a file's own grid: the first on which every key falls wins.
@@ -199,8 +199,9 @@ def sample_channel(ch: Channel, seconds: np.ndarray, key_tolerance: float = 0.0)
         h01, h11 = -2 * u3 + 3 * u2, u3 - u2
         res = (h00[:, None] * v[i, 1] + (h10 * dt)[:, None] * v[i, 2]
                + h01[:, None] * v[i + 1, 1] + (h11 * dt)[:, None] * v[i + 1, 0])
-        if ch.path == "r":
-            res = res / np.linalg.norm(res, axis=1, keepdims=True)
+        if ch.path == "r":  # tangents that cancel the value would divide by zero: hold the key there
+            n = np.linalg.norm(res, axis=1, keepdims=True)
+            res = np.where(n > 1e-12, res / np.where(n > 1e-12, n, 1.0), vals[i])
     elif ch.path == "r":
         res = slerp(vals[i], vals[i + 1], u)
     else:
@@ -271,6 +272,88 @@ def _ancestors(parents, i):
     return out
 
 
+#: Longest clip, in grid frames (a corrupt key time must not make the grid itself the allocation).
+MAX_FRAMES = 10_000_000
+_BAD_XFORM = "is not finite, not invertible (zero scale?) or huge"
+
+
+def _bounded(a) -> bool:
+    """Every entry finite and within +-LARGEST_COORDINATE (never warns)."""
+    with np.errstate(invalid="ignore"):
+        return bool(np.all(np.abs(np.asarray(a, dtype=np.float64)) <= LARGEST_COORDINATE))
+
+
+def check_scene(scene: Scene, path) -> None:
+    """What :func:`build` assumes of a reader's scene, checked once for every node-graph format
+    (a corrupt or hostile file otherwise ends in a singular-matrix failure, a NaN warning or an
+    index error inside the builder).  Raises :class:`InputError` naming ``path`` and the part:
+    node transforms and the world transforms they compose to, mesh points and triangles, skin
+    indices, weights and inverse binds, channel key times (finite, increasing) and values
+    (finite, bounded, non-zero rotations, invertible scales) and animation spans."""
+    names, k = scene.names, len(scene.names)
+    parents = np.asarray(scene.parents, dtype=np.int64)
+    local = np.asarray(scene.local, dtype=np.float64)
+    if local.shape != (k, 4, 4) or parents.shape != (k,) or np.any(parents >= np.arange(k)) or np.any(parents < -1):
+        raise InputError(path, "the node hierarchy is inconsistent (parents must come before their children)")
+    bad = np.flatnonzero(degenerate(local))
+    if not len(bad):
+        with np.errstate(all="ignore"):  # an overflow to inf is caught by degenerate()
+            bad = np.flatnonzero(degenerate(_world(local, parents, scene.no_parent_scale)))
+    if len(bad):
+        raise InputError(path, f"the transform of node {names[bad[0]]!r} {_BAD_XFORM}")
+    for m in scene.meshes:
+        nv = len(m.positions)
+        if not _bounded(m.positions):
+            raise InputError(path, f"mesh {m.name!r}: vertex positions are not finite or beyond +-{LARGEST_COORDINATE:g}")
+        if len(m.triangles) and (m.triangles.min() < 0 or m.triangles.max() >= nv):
+            raise InputError(path, f"mesh {m.name!r}: a face vertex index is out of range for {nv} vertices")
+        if m.node >= k or degenerate(np.asarray(m.to_world, dtype=np.float64)):
+            raise InputError(path, f"mesh {m.name!r}: its node or mesh-to-world transform {_BAD_XFORM}")
+        sk = m.skin
+        if sk is None:
+            continue
+        nb = len(sk.joints)
+        if (len(sk.inverse_binds) != nb or (nb and (sk.joints.max() >= k or sk.joints.min() < -1))
+                or not len(sk.vertex) == len(sk.joint) == len(sk.weight)):
+            raise InputError(path, f"mesh {m.name!r}: its skin's joints, inverse binds and weights do not match")
+        if len(sk.vertex) and (sk.vertex.min() < 0 or sk.vertex.max() >= nv or sk.joint.min() < 0 or sk.joint.max() >= nb):
+            raise InputError(path, f"mesh {m.name!r}: a skin weight names a vertex or joint out of range")
+        with np.errstate(invalid="ignore"):
+            if not np.all((sk.weight >= 0) & (sk.weight <= LARGEST_COORDINATE)):
+                raise InputError(path, f"mesh {m.name!r}: skin weights are negative, not finite or huge")
+        bad = np.flatnonzero(degenerate(np.asarray(sk.inverse_binds, dtype=np.float64)))
+        if len(bad):
+            raise InputError(path, f"mesh {m.name!r}: the inverse bind matrix of joint {sk.names[bad[0]]!r} {_BAD_XFORM}")
+    if scene.fps_hint is not None and not (np.isfinite(scene.fps_hint) and scene.fps_hint <= 1e6):
+        scene.fps_hint = None  # a corrupt declared rate: the grid comes from the keys
+    for a in scene.animations:
+        if a.span is not None and not (_bounded(a.span) and a.span[0] <= a.span[1]):
+            raise InputError(path, f"animation {a.name!r}: its time span {a.span} is not finite or reversed")
+        for c in a.channels:
+            what = f"animation {a.name!r}: node {names[c.node] if 0 <= c.node < k else c.node!r}"
+            t = np.asarray(c.times, dtype=np.float64)
+            v = np.asarray(c.values, dtype=np.float64)
+            width = {"t": 3, "r": 4, "s": 3}.get(c.path)
+            cubic = c.interpolation == "CUBICSPLINE"
+            if (not 0 <= c.node < k or width is None or c.interpolation not in INTERPOLATIONS
+                    or v.shape != ((len(t), 3, width) if cubic else (len(t), width))):
+                raise InputError(path, f"{what}: a channel's keys do not match its times ({v.shape} values "
+                                 f"for {len(t)} keys)")
+            if not _bounded(t) or np.any(np.diff(t) < 0):
+                raise InputError(path, f"{what}: key times are not finite, huge or not increasing")
+            if not _bounded(v):
+                raise InputError(path, f"{what}: animation values are not finite or beyond +-{LARGEST_COORDINATE:g}")
+            vals = v[:, 1] if cubic else v
+            if c.path == "r" and len(vals):
+                n = np.linalg.norm(vals, axis=1)
+                if np.any(n < 1e-6):
+                    raise InputError(path, f"{what}: a rotation key is a zero quaternion")
+            if c.path == "s" and len(vals) and np.any(np.abs(vals).min(axis=1) <= DEGENERATE_RATIO * np.abs(vals).max(axis=1)):
+                key = int(np.argmax(np.abs(vals).min(axis=1) <= DEGENERATE_RATIO * np.abs(vals).max(axis=1)))
+                raise InputError(path, f"{what}: the scale key at {t[key]:g} s is zero or degenerate "
+                                 f"({', '.join(f'{x:g}' for x in vals[key])}): joint space is not defined there")
+
+
 def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict | None = None) -> SkinnedMesh:
     """Turn ``scene`` into the skinned mesh of every mesh that moves with its skeleton.
 
@@ -294,6 +377,7 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
     SkinnedMesh
         Positions in skeleton (world) space at bind time, ``geom_bind`` identity, clips on the grid.
     """
+    check_scene(scene, path)
     names, parents, nlocal = scene.names, np.asarray(scene.parents, dtype=np.int64), scene.local
     k = len(names)
     nworld = _world(nlocal, parents, scene.no_parent_scale)
@@ -587,15 +671,18 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
         name = _clip_name(a.name, ai, taken)
         if len(keys) == 0:
             continue  # nothing to sample
+        with np.errstate(all="ignore"):
+            span = float(keys.max() - keys.min()) * rate
+        if not span <= MAX_FRAMES:  # before the grid is allocated (NaN too)
+            raise InputError(path, f"animation {a.name!r} spans {span:.3g} frames at {rate:g} fps; refusing")
         frames = grid_frames(keys, rate)
-        if len(frames) > 10_000_000:
-            raise InputError(path, f"animation {a.name!r} spans {len(frames)} frames; refusing")
         if budget is not None:
             budget.claim(len(frames) * (len(sub) + nj) * 16 * 8 * 3, f"animation {a.name!r} ({len(frames)} frames)")
         seconds = frames / rate
         chans = [c for c in a.channels if len(c.times) and need[c.node]]
         jl = _joint_locals(seconds, chans, nlocal, static_t, static_q, static_s, sub, sub_of, sub_parents,
-                           jsub, jparents, len(ghost), rest, sub_rrs, GRID_KEY_FRAMES / rate)
+                           jsub, jparents, len(ghost), rest, sub_rrs, GRID_KEY_FRAMES / rate,
+                           path=path, clip=name, jnames=jnames)
         interp = sorted({c.interpolation for c in a.channels if len(c.times) and not c.static})
         off_keys = keys[_off_grid(keys, rate)]
         info = {"name": name, "source_name": a.name, "source_keys": int(len(keys)),
@@ -606,7 +693,8 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
                             + ("" if not len(off_keys) else f" ({len(off_keys)} of {len(keys)} keys between frames)"))
         if len(off_keys):
             jl_keys = _joint_locals(off_keys, chans, nlocal, static_t, static_q, static_s, sub, sub_of,
-                                    sub_parents, jsub, jparents, len(ghost), rest, sub_rrs, GRID_KEY_FRAMES / rate)
+                                    sub_parents, jsub, jparents, len(ghost), rest, sub_rrs, GRID_KEY_FRAMES / rate,
+                                    path=path, clip=name, jnames=jnames)
             info["error_bound"] = _resampling_bound(frames, rate, jl, off_keys, jl_keys, jparents, bind,
                                                     positions, ji, jw)
         clips.append(Clip(name, frames, jl))
@@ -653,9 +741,11 @@ def _clip_name(raw, index, taken):
 
 
 def _joint_locals(seconds, chans, nlocal, static_t, static_q, static_s, sub, sub_of, sub_parents, jsub,
-                  jparents, n_ghost, rest, sub_rrs=None, key_tol=0.0):
+                  jparents, n_ghost, rest, sub_rrs=None, key_tol=0.0, path="", clip="", jnames=()):
     """(f, b, 4, 4) joint-local transforms at ``seconds``: node locals sampled, composed to world,
-    made relative to each joint's parent joint (ghost joints hold their rest)."""
+    made relative to each joint's parent joint (ghost joints hold their rest).  Raises
+    :class:`InputError` (naming ``path``, ``clip`` and the joint) where a joint's world transform
+    is degenerate (a scale through zero): joint space is not defined there."""
     f = len(seconds)
     loc = np.broadcast_to(nlocal[sub], (f, len(sub), 4, 4)).copy()
     by_node = {}
@@ -672,8 +762,14 @@ def _joint_locals(seconds, chans, nlocal, static_t, static_q, static_s, sub, sub
             R[:, x] = sample_channel(paths["r"], seconds, key_tol) if "r" in paths else static_q[node]
             S[:, x] = sample_channel(paths["s"], seconds, key_tol) if "s" in paths else static_s[node]
         loc[:, [sub_of[n] for n in nodes]] = compose_trs(T, R, S)
-    world = _world(loc, sub_parents, sub_rrs)
+    with np.errstate(all="ignore"):  # an overflow to inf is caught by degenerate()
+        world = _world(loc, sub_parents, sub_rrs)
     jw_ = world[:, jsub]
+    bad = np.argwhere(degenerate(jw_))
+    if len(bad):
+        f0, j0 = bad[0]
+        raise InputError(path, f"clip {clip!r} at {seconds[f0]:g} s: joint {jnames[j0] if len(jnames) > j0 else j0!r} "
+                         f"has a world transform that {_BAD_XFORM}")
     b = len(jsub) + n_ghost
     out = np.empty((f, b, 4, 4))
     nb = len(jsub)

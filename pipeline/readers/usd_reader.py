@@ -24,8 +24,9 @@ import os
 
 import numpy as np
 
-from ..errors import InputError
-from ..xforms import decompose_trs
+from ..errors import InputError, one_line
+from ..tolerances import LARGEST_COORDINATE
+from ..xforms import decompose_trs, degenerate
 from .common import AllocationBudget, check_finite, check_input_file
 from .scene import Animation, Channel, Scene, SceneMesh, Skin, build
 
@@ -40,11 +41,8 @@ def _open(path):
     from pxr import Tf, Usd
     try:
         stage = Usd.Stage.Open(path, Usd.Stage.LoadAll)
-    except Tf.ErrorException as exc:
-        msg = " ".join(str(exc).split())
-        if len(msg) > 200:
-            msg = msg[:200] + "..."
-        raise InputError(path, f"not a readable USD file: {msg}") from None
+    except Tf.ErrorException as exc:  # one_line: usd-core's reason only, cut, even if not UTF-8
+        raise InputError(path, f"not a readable USD file: {one_line(exc, 200)}") from None
     if stage is None:
         raise InputError(path, "not a readable USD file")
     return stage
@@ -67,6 +65,16 @@ def _triangulate(counts: np.ndarray, indices: np.ndarray, path, name) -> np.ndar
 
 
 def read_usd(path, meshes=None, fps=None):
+    """Read every UsdSkel skinned mesh of a stage (:func:`_read_usd`); usd-core's own error on
+    a value it cannot decode (a corrupt crate file) is one :class:`InputError` naming the file."""
+    from pxr import Tf
+    try:
+        return _read_usd(path, meshes, fps)
+    except Tf.ErrorException as exc:
+        raise InputError(path, f"corrupt USD data: {one_line(exc, 200)}") from None
+
+
+def _read_usd(path, meshes=None, fps=None):
     """Read every UsdSkel skinned mesh of a stage and every SkelAnimation (see the module docstring).
 
     Parameters
@@ -149,6 +157,10 @@ def read_usd(path, meshes=None, fps=None):
             raise InputError(path, f"skeleton {s.GetPrim().GetPath()} has {0 if bind_attr is None else len(bind_attr)} bindTransforms for {nj} joints")
         bind = _m44(bind_attr)
         check_finite(path, "bind transforms", bind.reshape(nj, -1))
+        bad = np.flatnonzero(degenerate(bind))
+        if len(bad):  # inverted for the skin's inverse binds
+            raise InputError(path, f"skeleton {s.GetPrim().GetPath()}: the bind transform of joint "
+                             f"{joints[bad[0]]!r} is not invertible (zero scale?) or huge")
         rest_attr = s.GetRestTransformsAttr().Get()
         if rest_attr is not None and len(rest_attr) == nj:
             rest = _m44(rest_attr)
@@ -203,6 +215,8 @@ def read_usd(path, meshes=None, fps=None):
         if mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
             tri = tri[:, ::-1]
         g = _m44(q.GetGeomBindTransform(early))
+        if degenerate(g) or not np.all(np.abs(p) <= LARGEST_COORDINATE):
+            raise InputError(path, f"mesh {name}: its points or geomBindTransform are not finite, huge or degenerate")
         p = p @ g[:3, :3].T + g[:3, 3]  # into skeleton space at bind time
         inf = q.ComputeJointInfluences(early)
         if not inf:
@@ -289,6 +303,10 @@ def read_usd(path, meshes=None, fps=None):
             return []
         ts = np.array(sorted(times))
         w = np.array([_m44(UsdGeom.XformCache(Usd.TimeCode(t)).GetLocalToWorldTransform(prim)) for t in ts])
+        bad = np.flatnonzero(degenerate(w))
+        if len(bad):
+            raise InputError(path, f"skeleton {prim.GetPath()}: its transform at time {ts[bad[0]]:g} is not "
+                             "finite, not invertible (zero scale?) or huge")
         t_, q_, s_ = decompose_trs(w)
         secs = ts / tcps
         node = skel_node[si]

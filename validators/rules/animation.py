@@ -53,25 +53,12 @@ def finite_animation(asset, ctx):
     Why: one NaN joint transform throws its vertices and its part sphere to NaN.
     Example: a rotation `(nan, 0, 0, 0)` on frame 12 from a degenerate bake."""
     for c in asset.clips:
-        for a in ("translations", "rotations", "scales"):
-            attr = c.prim.GetAttribute(a)
-            if not attr:
+        for a, t, kind, joint in asset.clip_sample_issues[c.name]:
+            if kind != "nonfinite":
                 continue
-            for i, t in enumerate(attr.GetTimeSamples()):
-                v = attr.Get(Usd.TimeCode(t))
-                if v is None:
-                    continue
-                arr = np.array(v, dtype=np.float64)  # quaternions come as (x, y, z, w): fine here
-                bad = ~np.all(np.isfinite(arr.reshape(len(arr), -1)), axis=1) if arr.size else np.zeros(0, bool)
-                if a == "rotations" and arr.size:
-                    bad |= np.linalg.norm(arr, axis=1) < 1e-12
-                if np.any(bad):
-                    j = int(np.argmax(bad))
-                    frame = int(np.searchsorted(c.times, t))
-                    joint = c.joints[j] if j < len(c.joints) else None
-                    yield hit(f"clip {c.name!r} time {t:g}: {a} of joint {joint!r} is not finite (or a zero rotation)",
-                              clip=c.name, time=float(t), frame=frame, joint=joint)
-                    break
+            frame = int(np.searchsorted(c.times, t))
+            yield hit(f"clip {c.name!r} time {t:g}: {a} of joint {joint!r} is not finite (or a zero rotation)",
+                      clip=c.name, time=float(t), frame=frame, joint=joint)
 
 
 @rule("COL504", "unique-clip-names", "error", "Clip names are unique.", needs=("root",))
@@ -102,14 +89,9 @@ def clip_joints(asset, ctx):
             detail = (f"unknown {extra[:3]}" if extra else "") + (f" missing {missing[:3]}" if missing else "")
             yield hit(f"clip {c.name!r}: joints differ from the skeleton's ({detail.strip() or 'different order'})",
                       clip=c.name)
-        for a in ("translations", "rotations", "scales"):
-            attr = c.prim.GetAttribute(a)
-            ts = attr.GetTimeSamples() if attr else []
-            if ts:
-                v = attr.Get(Usd.TimeCode(ts[0]))
-                if v is not None and len(v) != len(c.joints):
-                    yield hit(f"clip {c.name!r}: {a} has {len(v)} entries for {len(c.joints)} joints",
-                              clip=c.name, time=float(ts[0]))
+        for a, t, kind, n in asset.clip_sample_issues[c.name]:
+            if kind == "length":  # on any sample, not only the first: AnimQuery would pose it at identity
+                yield hit(f"clip {c.name!r}: {a} has {n} entries for {len(c.joints)} joints", clip=c.name, time=t)
 
 
 @rule("COL506", "has-clips", "warning", "The SkelRoot holds at least one clip.", needs=("root",))

@@ -81,6 +81,12 @@ def unreferenced_vertices(asset, ctx):
                   vertex=int(bad[0]), count=len(bad))
 
 
+def _grid(x):
+    """Snap finite floats to integer grid keys (int64), clamped so that absurd coordinates of a
+    corrupt asset do not overflow the cast."""
+    return np.round(np.clip(x, -2.0**62, 2.0**62)).astype(np.int64)
+
+
 @rule("COL206", "unwelded-duplicates", "warning",
       "No two vertices share a position and skin influences (they should have been welded).", needs=("mesh",))
 def unwelded_duplicates(asset, ctx):
@@ -92,10 +98,10 @@ def unwelded_duplicates(asset, ctx):
     Example: a UV seam exported as duplicated vertices."""
     p = asset.bind_points
     ok = np.all(np.isfinite(p), axis=1)
-    keys = [np.round(p[ok] / (tol.WELD_RELATIVE * asset.model_size)).astype(np.int64)]
+    keys = [_grid(p[ok] / (tol.WELD_RELATIVE * asset.model_size))]
     if asset.jidx is not None and len(asset.jidx) == asset.n:
         w = np.nan_to_num(asset.jw[ok].astype(np.float64))
-        keys += [np.where(w > 0, asset.jidx[ok], -1), np.round(w / 1e-4).astype(np.int64)]
+        keys += [np.where(w > 0, asset.jidx[ok], -1), _grid(w / 1e-4)]
     key = np.concatenate(keys, axis=1)
     idx = np.nonzero(ok)[0]
     _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
