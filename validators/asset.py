@@ -306,8 +306,33 @@ class LoadedAsset:
                 if bad.any():
                     i, j = np.argwhere(bad)[0]
                     issues.append((a, float(times[i]), "nonfinite", self.joints[d.anim_to_skel[j]]))
+            if not issues:
+                over = self._overflow(c, d)
+                if over is not None:
+                    issues.append(("composed transforms", over[0], "nonfinite", over[1]))
             out[c.name] = issues
         return out
+
+    #: A joint's skeleton-space transform with an entry beyond this is corrupt (no rig is 1e18
+    #: units across); the proof's products of such transforms would overflow to inf / NaN.
+    COMPOSED_LIMIT = 1e18
+
+    def _overflow(self, c: Clip, d):
+        """``(time, joint)`` of the first sample where composing the clip's finite joint values
+        down the hierarchy overflows (beyond :data:`COMPOSED_LIMIT`), else None."""
+        from runtime.kernels import pose as PK
+
+        if self.parents is None or self.rest is None or not len(c.times):
+            return None
+        times = np.asarray(c.times, dtype=np.float64)
+        for lo in range(0, len(times), 256):
+            with np.errstate(invalid="ignore", over="ignore"):
+                skel = self.skel_transforms(PK.locals_at(d, times[lo:lo + 256], self.rest))
+                bad = ~(np.abs(skel) <= self.COMPOSED_LIMIT).all(axis=(-2, -1))
+            if bad.any():
+                i, j = np.argwhere(bad)[0]
+                return float(times[lo + i]), self.joints[j]
+        return None
 
     def _scan_samples(self, c: Clip) -> list:
         issues = []
@@ -489,6 +514,9 @@ class LoadedAsset:
                 self.clip_data(c)
         except ColliderError as e:
             return False, f"a clip cannot be read: {e}"
+        bad = [n for n, issues in self.clip_sample_issues.items() if issues]
+        if bad:
+            return False, f"clip {bad[0]!r} has joint transforms that are not finite (COL503)"
         return True, ""
 
     # -- the certificate's view ----------------------------------------------------------------

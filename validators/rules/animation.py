@@ -49,7 +49,7 @@ def time_code_rate(asset, ctx):
       needs=("clips",))
 def finite_animation(asset, ctx):
     """What: at every time sample, every joint's translation, rotation (non-zero quaternion) and
-    scale is finite.
+    scale is finite, and so are the joints' transforms composed down the hierarchy (within 1e18).
     Why: one NaN joint transform throws its vertices and its part sphere to NaN.
     Example: a rotation `(nan, 0, 0, 0)` on frame 12 from a degenerate bake."""
     for c in asset.clips:
@@ -57,7 +57,9 @@ def finite_animation(asset, ctx):
             if kind != "nonfinite":
                 continue
             frame = int(np.searchsorted(c.times, t))
-            yield hit(f"clip {c.name!r} time {t:g}: {a} of joint {joint!r} is not finite (or a zero rotation)",
+            what = (f"the transform of joint {joint!r}, composed down the hierarchy, overflows"
+                    if a == "composed transforms" else f"{a} of joint {joint!r} is not finite (or a zero rotation)")
+            yield hit(f"clip {c.name!r} time {t:g}: {what}",
                       clip=c.name, time=float(t), frame=frame, joint=joint)
 
 
