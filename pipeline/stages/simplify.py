@@ -31,9 +31,10 @@ the proxy's parts, spheres and the every-frame proof are made exactly as for any
    * Topology: the library has no link-condition test, so after every decimation each closed
      shell is checked to be closed, two-manifold (every edge used by exactly two of its faces in
      opposite directions, every vertex's fan one cycle, no duplicate face) and of unchanged Euler
-     characteristic; a defect made by decimation (one that involves a vertex something collapsed
-     into) is repaired by undoing that cluster's latest collapse, until none is left.  When the
-     repairs leave the proxy above ``--target-faces``, the decimation reruns with a lower target.
+     characteristic; a shell the decimation made defective keeps the longest prefix of its own
+     collapses that leaves it sound (shells are independent: a collapse joins the ends of an
+     edge).  When the repairs leave the proxy above ``--target-faces``, the decimation reruns
+     with a lower target.
 
 2. Skin: closest-point transfer on the full rest mesh.  Each proxy vertex takes the per-bone
    weights of its nearest point on the full rest surface, interpolated barycentrically over that
@@ -87,10 +88,8 @@ MAX_LEVEL = 64
 MAX_REFINED = 20000
 #: Per pose, the largest triangle bounds kept from the first pass (for the per-clip table).
 TOP_PER_POSE = 32
-#: Repair rounds (each undoes the latest collapse of every cluster in a defect).
-MAX_REPAIR_ROUNDS = 200
 #: Decimation reruns when repairs leave the proxy above the target.
-MAX_DECIMATIONS = 4
+MAX_DECIMATIONS = 6
 #: --max-deviation: a prefix search stops when the face counts bracketing the limit differ by
 #: less than this fraction.
 PREFIX_TOLERANCE = 0.02
@@ -563,40 +562,65 @@ def _proxy_geometry(pos, tris, root, quadrics):
     return opt.astype(np.float32), new[t], kept, new, single
 
 
-def _active_mask_repair(n, col, active, tris, shell, count, closed_in, euler_in, pos, quadrics):
-    """Undo collapses until no decimation-made topology defect is left.  Returns ``(active,
-    geometry, undone)``."""
-    undone = 0
-    for _ in range(MAX_REPAIR_ROUNDS):
-        root = _roots(n, col[active])
-        geo = _proxy_geometry(pos, tris, root, quadrics)
-        _, pt, kept, new, single = geo
-        bad = _defect_vertices(pt, len(single), shell[kept], count, closed_in, euler_in)
-        bad = bad[~single[bad]]
-        old_of_new = np.flatnonzero(new >= 0)
-        bad_roots = old_of_new[bad]
-        # closed shells the decimation removed altogether
-        gone = closed_in & (np.bincount(shell[kept], minlength=count) == 0)
-        if gone.any():
-            bad_roots = np.union1d(bad_roots, root[tris[gone[shell]]].ravel())
-        if not len(bad_roots):
-            return active, geo, undone
-        # the latest active collapse of each defective cluster
-        act = np.flatnonzero(active)
-        r_of = root[col[act, 0]]
-        hit = np.isin(r_of, bad_roots)
-        act, r_of = act[hit], r_of[hit]
-        last = np.full(n, -1, np.int64)
-        np.maximum.at(last, r_of, act)
-        undo = last[bad_roots]
-        undo = undo[undo >= 0]
-        if not len(undo):
-            return active, geo, undone
-        active = active.copy()
-        active[undo] = False
-        undone += len(undo)
+def _bad_shells(n, col, active, tris, shell, count, closed_in, euler_in, vshell, pos, quadrics):
+    """Build the proxy for the ``active`` collapses; returns ``(geometry, bad (count,) bool)``:
+    the shells with a topology defect (see :func:`_defect_vertices`) or, if closed, removed."""
     root = _roots(n, col[active])
-    return active, _proxy_geometry(pos, tris, root, quadrics), undone
+    geo = _proxy_geometry(pos, tris, root, quadrics)
+    _, pt, kept, new, single = geo
+    badv = _defect_vertices(pt, len(single), shell[kept], count, closed_in, euler_in)
+    bad = np.zeros(count, bool)
+    bad[vshell[np.flatnonzero(new >= 0)[badv]]] = True
+    bad |= closed_in & (np.bincount(shell[kept], minlength=count) == 0)
+    return geo, bad
+
+
+def _repair(n, col, active, tris, shell, count, closed_in, euler_in, pos, quadrics):
+    """Undo collapses until no shell has a topology defect the decimation made.
+
+    Shells are independent (a collapse joins the two ends of an edge), so each defective shell
+    is bisected on its own collapse sequence for the longest prefix that leaves it sound, all
+    shells at once.  Shells already defective in the input are left as the decimation made them
+    (their defects are the source's).  Returns ``(active, geometry, undone)``."""
+    vshell = np.zeros(n, np.int64)
+    vshell[tris.ravel()] = np.repeat(shell, 3)
+    _, inherited = _bad_shells(n, col, np.zeros(len(col), bool), tris, shell, count, closed_in, euler_in, vshell,
+                               pos, quadrics)
+    cshell = vshell[col[:, 0]]
+    active = active.copy()
+    undone = 0
+    for _ in range(3):
+        geo, bad = _bad_shells(n, col, active, tris, shell, count, closed_in, euler_in, vshell, pos, quadrics)
+        bad &= ~inherited
+        if not bad.any():
+            return active, geo, undone
+        todo = {int(s): np.flatnonzero(active & (cshell == s)) for s in np.flatnonzero(bad)}
+        lo = {s: 0 for s in todo}
+        hi = {s: len(ix) for s, ix in todo.items()}
+        while any(hi[s] - lo[s] > 1 for s in todo):
+            trial = active.copy()
+            mids = {}
+            for s, ix in todo.items():
+                mids[s] = (lo[s] + hi[s]) // 2 if hi[s] - lo[s] > 1 else lo[s]
+                trial[ix[mids[s]:]] = False
+            _, tb = _bad_shells(n, col, trial, tris, shell, count, closed_in, euler_in, vshell, pos, quadrics)
+            for s in todo:
+                if hi[s] - lo[s] > 1:
+                    if tb[s]:
+                        hi[s] = mids[s]
+                    else:
+                        lo[s] = mids[s]
+        for s, ix in todo.items():
+            active[ix[lo[s]:]] = False
+            undone += len(ix) - lo[s]
+    geo, bad = _bad_shells(n, col, active, tris, shell, count, closed_in, euler_in, vshell, pos, quadrics)
+    bad &= ~inherited
+    if bad.any():  # not monotone after all: those shells are kept as they came in
+        off = active & bad[cshell]
+        undone += int(off.sum())
+        active[off] = False
+        geo, _ = _bad_shells(n, col, active, tris, shell, count, closed_in, euler_in, vshell, pos, quadrics)
+    return active, geo, undone
 
 
 def transfer_weights(full: SkinnedMesh, points: np.ndarray, max_influences: int):
@@ -648,9 +672,8 @@ class _Candidate:
 
 
 def _build(full: SkinnedMesh, col, active, ctx) -> _Candidate:
-    active, geo, undone = _active_mask_repair(full.vertex_count, col, active, full.triangles.astype(np.int64),
-                                              ctx["shell"], ctx["count"], ctx["closed"], ctx["euler"],
-                                              ctx["pos"], ctx["quadrics"])
+    active, geo, undone = _repair(full.vertex_count, col, active, full.triangles.astype(np.int64),
+                                  ctx["shell"], ctx["count"], ctx["closed"], ctx["euler"], ctx["pos"], ctx["quadrics"])
     pos, tris, *_ = geo
     G = full.geom_bind
     skel_pts = pos.astype(np.float64) @ G[:3, :3].T + G[:3, 3]
@@ -714,19 +737,25 @@ def simplify(mesh: SkinnedMesh, target_faces: int | None = None, max_deviation=N
         col = np.zeros((0, 2), np.int64)
     else:
         emb = _embedding(mesh.positions, tris, dominant, mesh.joint_count, SIMPLIFY_BONE_BOUNDARY)
-        ask = goal
-        best = None
+        ask, tried, best = goal, [], None
         for _ in range(MAX_DECIMATIONS):
             decimations += 1
             col = _collapses(emb, tris, ask)
             cand = _build(mesh, col, np.ones(len(col), bool), ctx)
-            if best is None or cand.mesh.face_count < best[1].mesh.face_count:
-                best = (col, cand)
-            over = cand.mesh.face_count - goal
-            if target_faces is None or over <= 0:
+            faces = cand.mesh.face_count
+            tried.append((ask, faces))
+            within = faces <= goal
+            if best is None or (within and (best[2] > goal or faces > best[2])) or (not within and faces < best[2]):
+                best = (col, cand, faces)
+            if target_faces is None or within and faces >= goal * (1 - PREFIX_TOLERANCE) or ask <= 4:
                 break
-            ask = max(4, ask - over - 2)
-        col, cand = best
+            # repairs add faces: aim lower (secant on the asked-for vs reached counts)
+            (a0, f0), (a1, f1) = (tried[-2] if len(tried) > 1 else (goal * 2, goal * 2 + (faces - ask) * 1.0)), tried[-1]
+            slope = (f1 - f0) / (a1 - a0) if a1 != a0 and f1 != f0 else 1.0
+            ask = int(max(4, min(len(tris) - 1, a1 + (goal - f1) / max(slope, 0.1))))
+            if any(a == ask for a, _ in tried):
+                break
+        col, cand, _ = best
 
     if limit is not None and len(col):
         td = time.perf_counter()
