@@ -35,6 +35,9 @@ def _stage_line(rep) -> str:
         return f"{c['parts']} parts ({c['mode']}), {len(c.get('folded_joints', []))} joints folded"
     if s == "spheres":
         return f"max radius {c['max_radius']:.4g}, max slack x{c['max_slack_ratio']:.3f}"
+    if s == "simplify":
+        return (f"{c['faces_in']} -> {c['faces_out']} faces, {c['closed_shells_out']}/{c['closed_shells_in']} closed shells "
+                f"closed, deviation <= {c['deviation']:.4g} ({100 * c['deviation_relative']:.3g}% of size)")
     if s == "write":
         return f"{c['path']} ({c['bytes']} bytes)"
     return ""
@@ -60,9 +63,31 @@ def format_summary(result) -> str:
             lines.append(f"  {i:>4} {str(p.get('joint'))[:20]:<20} {int(faces[i + 1] - faces[i]):>6} "
                          f"{p.get('vertices', 0):>8} {p.get('radius', 0):>10.4g} {p.get('slack_ratio', float('nan')):>7.3f}")
         lines.append("  (radius in joint space; slack = radius / tightest per-frame sphere)")
+    simp = next((r for r in result.reports if r.stage == "simplify"), None)
+    if simp is not None:
+        lines.append("")
+        lines += proxy_lines(simp)
     for w in s["warnings"]:
         lines.append(f"warning: {w}")
     return "\n".join(lines)
+
+
+def proxy_lines(rep) -> list:
+    """The collision proxy's deviation: the worst (clip, frame, bone) and a table per clip."""
+    c = rep.counts
+    w = c["worst"]
+    where = "the bind pose" if w["frame"] in (-1, None) else f"clip {w['clip']} frame {w['frame']}"
+    out = [f"  proxy: {c['faces_in']} -> {c['faces_out']} faces ({c['vertices_out']} vertices); worst deviation "
+           f"{c['deviation']:.4g} at {where}, bone {w['bone']} ({w['direction']})" if w["bone"] else
+           f"  proxy: {c['faces_in']} -> {c['faces_out']} faces: the full mesh (deviation 0)"]
+    clips = rep.details.get("clips", [])
+    if clips:
+        out.append(f"  {'clip':<24} {'frames':>6} {'worst frame':>11} {'deviation':>10}")
+        for r in clips:
+            out.append(f"  {str(r['clip'])[:24]:<24} {r['frames']:>6} {r['frame']:>11} {r['deviation']:>10.4g}")
+        out.append(f"  (deviation: upper bound of the two-sided distance to the full skinned mesh, stage units; "
+                   f"bind pose {rep.details.get('bind_pose_deviation', 0):.4g})")
+    return out
 
 
 @click.command("import", context_settings={"help_option_names": ["-h", "--help"]})
@@ -90,6 +115,11 @@ def format_summary(result) -> str:
               help="Override the up axis the reader assumes for the source.")
 @click.option("--source-meters-per-unit", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Override the units the reader assumes for the source.")
+@click.option("--target-faces", type=click.IntRange(min=4), default=None, metavar="N",
+              help="Simplify the collision mesh to at most N triangles (a collision proxy; off by default).")
+@click.option("--max-deviation", default=None, metavar="D",
+              help="Simplify while the proxy stays within D of the full skinned mesh on every frame "
+                   "(stage units, or D% of the model size).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--progress/--no-progress", default=None,
               help="Show a progress bar on stderr (default: for large inputs on a terminal).")
@@ -99,12 +129,12 @@ def format_summary(result) -> str:
               help="Several inputs: run on a Dask cluster (tcp://host:8786, or local:N; needs colossus[dask]).")
 @maps_errors(input_status=1)
 def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, parts_mode, parts_threshold,
-               min_part_faces, meshes, fps, source_up_axis, source_meters_per_unit, as_json, progress, jobs,
-               scheduler):
+               min_part_faces, meshes, fps, source_up_axis, source_meters_per_unit, target_faces, max_deviation,
+               as_json, progress, jobs, scheduler):
     """Import the Blender export SRC and write the collider asset OUT.
 
     \b
-    Stages: read, bake, weld, orient, bind, parts, spheres, write.
+    Stages: read, bake, weld, orient, bind, [simplify], parts, spheres, write.
     Exit status: 0 written; 1 the input is unusable (nothing written); 2 usage.
 
     \b
@@ -124,7 +154,7 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
         unweighted=unweighted, parts=parts_mode, min_part_faces=min_part_faces,
         parts_threshold=parts_threshold, meshes=list(meshes), fps=fps,
         source_up_axis=source_up_axis.upper() if source_up_axis else None,
-        source_meters_per_unit=source_meters_per_unit,
+        source_meters_per_unit=source_meters_per_unit, target_faces=target_faces, max_deviation=max_deviation,
     )
     from .engine import is_glob
     from .readers import USD_EXTENSIONS
@@ -150,7 +180,8 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
         click.echo(("\r" + line.ljust(60)) if tty else line, err=True, nl=not tty)
 
     result = import_asset(src, out, settings, progress=on_stage)
-    on_stage(8, 8, "done")
+    n = len(settings.stages())
+    on_stage(n, n, "done")
     if progress and tty:
         click.echo("", err=True)
     if as_json:

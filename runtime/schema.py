@@ -39,9 +39,18 @@ PARTS_ATTRIBUTES = {
 PROVENANCE_KEY = "colossus"
 #: A SkelAnimation's customData key with the clip's own name when it is not a valid prim name.
 CLIP_NAME_KEY = "colossus:clipName"
-#: Provenance keys of a simplified collision proxy (issue: collision proxy).
+#: Provenance keys of a simplified collision proxy (issue: collision proxy).  They are customData
+#: *key paths* (``GetCustomDataByKey``): ``customData["colossus"]["proxy"]["sourceFaces"]`` etc.,
+#: inside the provenance dictionary.  ``maxDeviation``: stage units, an upper bound of the
+#: two-sided distance between the proxy and the full skinned mesh on the bind pose and every
+#: frame of every clip; the ``worst*`` keys say where the bound is reached.
+PROXY_KEY = PROVENANCE_KEY + ":proxy"
 PROXY_SOURCE_FACES = "colossus:proxy:sourceFaces"
 PROXY_MAX_DEVIATION = "colossus:proxy:maxDeviation"
+PROXY_WORST_CLIP = "colossus:proxy:worstClip"
+PROXY_WORST_FRAME = "colossus:proxy:worstFrame"
+PROXY_WORST_BONE = "colossus:proxy:worstBone"
+PROXY_WORST_DIRECTION = "colossus:proxy:worstDirection"
 
 #: Prim names under the SkelRoot.
 SKELETON_NAME = "Skeleton"
