@@ -22,6 +22,7 @@ DEFAULT_OPTIONS = {
     "slack_ratio": tol.SLACK_RATIO,
     "chunk_frames": None,
     "clip_proofs": None,
+    "max_deviation": None,
 }
 
 
@@ -29,6 +30,7 @@ class Context:
     """Options shared by the rules of one asset, and the cached frame proof.
 
     Attributes: ``max_influences`` (int), ``subframes`` (int), ``slack_ratio`` (float),
+    ``max_deviation`` (``(length, relative)`` or None: COL701's limit),
     ``chunk_frames`` (int or None: automatic), ``clip_proofs`` (proofs of the asset's clips
     already run elsewhere, e.g. one per clip on other workers, merged instead of proving again;
     see :mod:`validators.parallel`).
@@ -49,6 +51,9 @@ class Context:
         self.slack_ratio = float(opts["slack_ratio"])
         self.chunk_frames = opts["chunk_frames"]
         self.clip_proofs = opts["clip_proofs"]
+        from pipeline.stages.simplify import parse_max_deviation
+        #: ``(length, relative)`` or None: the COL701 limit (``--max-deviation``)
+        self.max_deviation = parse_max_deviation(opts["max_deviation"])
         self._proof = None
 
     def proof(self):
@@ -86,7 +91,8 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
     severities : dict, optional
         ``code -> "error" | "warning" | "info"`` overrides.
     **options
-        ``max_influences`` (4), ``subframes`` (0), ``slack_ratio`` (1.5), ``chunk_frames`` (auto).
+        ``max_influences`` (4), ``subframes`` (0), ``slack_ratio`` (1.5), ``chunk_frames`` (auto),
+        ``max_deviation`` (None; ``"0.02"`` stage units or ``"1%"`` of the model size: COL701).
 
     Returns
     -------
