@@ -53,3 +53,6 @@ DEVIATION_REFINE = 0.5
 #: ``simplify``: added to the deviation bound (times the model size) for the float32 rounding of
 #: stored positions and weights.
 DEVIATION_PAD = 1e-6
+#: ``simplify``: the deviation is resolved to this (times the model size): a triangle whose bound
+#: is within this of the largest sampled distance is not refined further.
+DEVIATION_RESOLUTION = 1e-4

@@ -72,7 +72,7 @@ from scipy.spatial import cKDTree
 from ..errors import UsageError
 from ..geometry.surface_distance import CandidateQuery, cover_radius, grid_barycentrics, triangle_corner_bound
 from ..model import SkinnedMesh, skel_transforms
-from ..tolerances import DEVIATION_PAD, DEVIATION_REFINE, SIMPLIFY_BONE_BOUNDARY, model_scale
+from ..tolerances import DEVIATION_PAD, DEVIATION_REFINE, DEVIATION_RESOLUTION, SIMPLIFY_BONE_BOUNDARY, model_scale
 from . import StageReport
 from .bind import limit_influences
 from .orient import orient
@@ -266,7 +266,7 @@ def _one_sided(src: _Side, tgt: _Side, poses: Poses, k: int, refine: float, size
     ref_row = np.full(m, -1, np.int64)
     ref_vals = np.zeros((F, 0))
     while True:
-        R = np.flatnonzero((umax > L * (1.0 + refine) + 1e-12 * size) & (level < MAX_LEVEL))
+        R = np.flatnonzero((umax > L * (1.0 + refine) + DEVIATION_RESOLUTION * size) & (level < MAX_LEVEL))
         if not len(R):
             break
         if len(R) > MAX_REFINED:
@@ -288,7 +288,7 @@ def _one_sided(src: _Side, tgt: _Side, poses: Poses, k: int, refine: float, size
         q = CandidateQuery(idx, bary, tgt.tri, cands(pts), n, len(tgt.pos))
         # only poses where some triangle's bound is above the threshold need the finer samples;
         # elsewhere every triangle is already bounded by that pose's largest bound (<= threshold)
-        thr = L * (1.0 + refine) + 1e-12 * size
+        thr = L * (1.0 + refine) + DEVIATION_RESOLUTION * size
         pose_top = top_u[:, 0] if ref_vals.shape[1] == 0 else np.maximum(top_u[:, 0], ref_vals.max(axis=1))
         hot = np.flatnonzero(pose_top > thr)
         vals = np.repeat(pose_top[:, None], len(Tr), axis=1)
