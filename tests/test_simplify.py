@@ -97,7 +97,7 @@ def test_simplify_tube_reaches_target_keeps_closed_and_does_not_mutate():
 def test_deviation_is_zero_for_the_full_mesh_and_positive_for_a_proxy():
     m = _bound_tube()
     d = deviation(m, m)
-    assert d.bound <= 2e-4 * 3.5  # resolved to DEVIATION_RESOLUTION of the model size
+    assert d.bound <= 0.01 * 3.3  # identical surfaces: only the sampling radius at MAX_LEVEL remains
     p, rep = simplify(m, target_faces=200)
     assert rep.counts["deviation"] > 0 and len(mesh_poses(m).mats) == 1 + sum(c.frame_count for c in m.clips)
 

@@ -83,7 +83,7 @@ FULL_CANDIDATES = 16
 #: ... and of the coarse proxy (full -> proxy, and the weight transfer).
 PROXY_CANDIDATES = 8
 #: Finest barycentric grid level the deviation refinement goes to.
-MAX_LEVEL = 64
+MAX_LEVEL = 16
 #: At most this many triangles are refined per round (the worst first).
 MAX_REFINED = 20000
 #: Per pose, the largest triangle bounds kept from the first pass (for the per-clip table).
