@@ -157,8 +157,8 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
         source_meters_per_unit=source_meters_per_unit, target_faces=target_faces, max_deviation=max_deviation,
     )
     from .engine import is_glob
-    from .readers import USD_EXTENSIONS
-    one_file_out = out.lower().endswith(USD_EXTENSIONS) and not os.path.isdir(out)
+    from .stages.write import OUTPUT_EXTENSIONS
+    one_file_out = out.lower().endswith(OUTPUT_EXTENSIONS) and not os.path.isdir(out)
     if len(srcs) > 1 or ((os.path.isdir(srcs[0]) or is_glob(srcs[0])) and not one_file_out):
         return _import_many(srcs, out, settings, as_json, progress, jobs, scheduler)
     src = srcs[0]
@@ -193,9 +193,9 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
 def _import_many(srcs, out, settings, as_json, progress, jobs, scheduler):
     """``colossus import A B ... -o DIR``: see :mod:`pipeline.batch`."""
     from .batch import format_import_rows, import_many
-    from .readers import USD_EXTENSIONS
+    from .stages.write import OUTPUT_EXTENSIONS
 
-    if os.path.isfile(out) or (not os.path.isdir(out) and out.lower().endswith(USD_EXTENSIONS)):
+    if os.path.isfile(out) or (not os.path.isdir(out) and out.lower().endswith(OUTPUT_EXTENSIONS)):
         raise UsageError(f"-o {out}: with several inputs, -o is the output directory")
     settings.check()
     show = sys.stderr.isatty() if progress is None else progress

@@ -36,8 +36,8 @@ def reader_for(path):
         if name.endswith(ext):
             return READERS[ext]
     raise InputError(path, f"unsupported file type {os.path.splitext(name)[1] or '(no extension)'!r}; "
-                     f"supported: {', '.join(sorted(set(USD_EXTENSIONS) | {'.glb', '.gltf', '.fbx', '.dae'}))} "
-                     "and every other format assimp reads")
+                     f"supported: {' '.join(USD_EXTENSIONS)} through usd-core, and {len(ASSIMP_EXTENSIONS)} "
+                     f"through assimp ({' '.join(ASSIMP_EXTENSIONS[:4])} ... {ASSIMP_EXTENSIONS[-1]})")
 
 
 def read(path, meshes=None, fps=None):
