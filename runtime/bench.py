@@ -283,3 +283,29 @@ def format_rows(rows) -> str:
 
 if __name__ == "__main__":  # pragma: no cover
     print(format_rows(run_bench()))
+
+
+def game_frame(col, clip, seed=0):
+    """A callable running one game frame on ``col`` as row 2 above measures it: the pose at a new
+    time of ``clip``, one player sphere contact query (radius 3.5% of the model size) and 16 rays
+    around the player (8 ground probes 2 radii long, 8 camera rays)."""
+    rng = np.random.default_rng(seed)
+    times = col.frame_times(clip)
+    ts = iter(rng.uniform(times[0], times[-1], 10 ** 6))
+    pose = col.pose(clip, float(times[len(times) // 2]))
+    r = 0.035 * col.size()
+    player = pose.points[int(np.argmax(pose.points[:, 1]))].astype(np.float64) + [0, 0.5 * r, 0]
+    ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    fan = np.c_[0.4 * np.cos(ang), -np.ones(8), 0.4 * np.sin(ang)]
+    cam = player + [-6 * r, 3 * r, 0.5 * r]
+    look = player + rng.normal(scale=r, size=(8, 3))
+    o = np.r_[np.repeat(player[None], 8, 0), np.repeat(cam[None], 8, 0)]
+    dirs = np.r_[fan, look - cam]
+
+    def frame():
+        p = col.pose(clip, next(ts), out=pose)
+        p.sphere_contacts(player, r)
+        p.raycast(o[:8], dirs[:8], 2 * r)
+        p.raycast(o[8:], dirs[8:])
+
+    return frame
