@@ -1,147 +1,72 @@
-"""Distances between triangle surfaces, as sound upper bounds (used by ``simplify``).
+"""Two-sided distance between two animated triangle surfaces, as a sound upper bound on every pose
+(used by ``simplify`` to bound how far a collision proxy strays from the full skinned mesh).
 
-The bound (after Metro and libigl's ``hausdorff`` lower/upper bounds)
-----------------------------------------------------------------------
-For a source surface ``S`` and a target surface ``T``, the one-sided distance is
-``h(S, T) = max over x in S of d(x, T)``.  ``d(., T)`` is 1-Lipschitz, so for a source triangle
-``t`` covered by sample points ``s_i`` within radius ``r`` (every point of ``t`` within ``r`` of
-some sample)::
+The two bounds (after Metro's sampling and libigl's ``hausdorff`` lower/upper bounds)
+------------------------------------------------------------------------------------
+For a source surface ``S`` and a target surface ``T`` at one pose, the one-sided distance is
+``h(S, T) = max over x in S of d(x, T)``.  Every bound below uses only distances to *some*
+triangles of ``T`` (``d(x, T) <= d(x, T_j)`` for any target triangle ``T_j``), so a candidate
+list that misses the nearest triangle can over-state the distance, never under-state it.
+For a triangle ``tau`` of the source (or a piece of one) with corners ``x_0, x_1, x_2``:
 
-    max over x in t of d(x, T)  <=  max_i d(s_i, T) + r
+* **Lipschitz**: ``d(., T)`` is 1-Lipschitz, and every point of ``tau`` is within
+  ``cover(tau)`` (:func:`cover_radius`, the exact covering radius of a triangle by its corners)
+  of a corner, so ``max over tau of d(x, T) <= max_i u_i + cover(tau)`` for any upper bounds
+  ``u_i >= d(x_i, T)``.
+* **Convexity**: the distance to one triangle ``T_h`` (a convex set) is a convex function, so
+  its maximum over ``tau`` is at a corner: ``max over tau of d(x, T) <= max_i d(x_i, T_h)``.
+  This one is exact where the two surfaces coincide (a proxy triangle the decimation left as it
+  was, a full triangle lying on one proxy triangle), where the Lipschitz bound would need samples
+  finer than the distance itself.
 
-and ``d(s_i, T) <= d(s_i, P)`` for any patch ``P`` of ``T`` (a subset of its triangles), so the
-exact distance from a sample to a few candidate triangles is an upper bound too.  The samples of
-a triangle are its corners and the points of a barycentric grid of level ``s`` (``s**2`` similar
-sub-triangles); the covering radius of the grid is ``cover_radius(t) / s``, where
-:func:`cover_radius` is the exact covering radius of a triangle by its three corners (the
-circumradius for a non-obtuse triangle; for an obtuse one the largest distance along the long
-side to the nearer corner, where a perpendicular bisector of a short side crosses it).
+A piece's bound is the smaller of the two.  Pieces whose bound is more than ``refine`` above the
+largest distance sampled so far (``L``, over both directions and every pose) are split into four
+(midpoints of the sides: the cover radius halves) *at the poses where they are above*, up to
+``max_depth`` times; a piece at ``max_depth`` keeps its bound, which stays an upper bound.  So the
+result is an upper bound of the two-sided distance at every pose, and where the depth suffices it
+is at most ``L (1 + refine) + resolution`` with ``L`` a distance actually found.
 
-Everything is evaluated on the skinned triangles of each pose, so the bound holds for the shapes
-drawn at that pose, whatever the skinning did to the triangles' sizes.
+Work shared across poses
+------------------------
+Candidate triangles (the ``k`` nearest target triangles by centroid) and each sample's nearest
+target triangle ("home") are chosen once, on the setup pose (pose 0, the bind pose).  On every
+other pose a sample is first bounded by its exact distance to its home triangle alone (one
+point-triangle test); only samples of pieces still above the threshold get the exact distance to
+all their candidates.  Both directions share one skinning per pose chunk (``frames``).
 
-Public functions
-----------------
-cover_radius(a, b, c) -> (m,) float64
-grid_barycentrics(level) -> (g, 3) float64
-nearest_on_candidates(points_v, sample_idx, sample_bary, target_v, target_tri, candidates)
-    -> (distance (N,) float64, triangle (N,) int64, barycentric (N, 3) float64)
-triangle_corner_bound(v, tri, vertex_distance) -> (m,) float64
-CandidateQuery(sample_idx, sample_bary, target_tri, candidates).distances(src_v, target_v)
-    the same as ``nearest_on_candidates``, checked once and evaluated on many poses
+Kernels (private, ``_``-prefixed; readable references in ``tests/naive.py``)
+--------------------------------------------------------------------------
+``_sample_distances``: for (pose, sample) pairs, the distance to the nearest of a candidate row;
+``_piece_bounds``: for (pose, piece) pairs, the smaller of the two bounds above.  Ericson's
+closest point on a triangle is the runtime's (:mod:`runtime.kernels`), the one copy of it.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numba import njit, prange
+from scipy.spatial import cKDTree
+
+from runtime.kernels import _closest_on_triangle
+
+#: Pairs per task of the parallel kernels (the scratch buffer is allocated once per task).
+BLOCK = 512
+#: Exact distances on poses other than the setup pose walk at most this many steps to nearer
+#: neighbouring triangles after the candidates.
+WALK_STEPS = 8
+#: A piece's home triangle is chosen among its corners' nearest triangles and this many of each
+#: corner's candidates.
+HOME_CANDIDATES = 6
+#: Candidate searches widen up to this many nearest centroids.
+MAX_CANDIDATE_SEARCH = 32
+#: Integer barycentric resolution of the pieces: 2**MAX_DEPTH_LIMIT subdivisions per side at most.
+MAX_DEPTH_LIMIT = 10
+_D = 1 << MAX_DEPTH_LIMIT
 
 
 # ------------------------------------------------------------------------------ kernels
-@njit(cache=True, inline="always")
-def _closest_on_triangle(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
-    """Squared distance from p to triangle abc and the barycentrics (u, v, w) of the closest
-    point (Ericson, Real-Time Collision Detection, 5.1.5).  float64 throughout."""
-    abx, aby, abz = bx - ax, by - ay, bz - az
-    acx, acy, acz = cx - ax, cy - ay, cz - az
-    apx, apy, apz = px - ax, py - ay, pz - az
-    d1 = abx * apx + aby * apy + abz * apz
-    d2 = acx * apx + acy * apy + acz * apz
-    if d1 <= 0.0 and d2 <= 0.0:
-        u, v, w = 1.0, 0.0, 0.0
-    else:
-        bpx, bpy, bpz = px - bx, py - by, pz - bz
-        d3 = abx * bpx + aby * bpy + abz * bpz
-        d4 = acx * bpx + acy * bpy + acz * bpz
-        if d3 >= 0.0 and d4 <= d3:
-            u, v, w = 0.0, 1.0, 0.0
-        else:
-            vc = d1 * d4 - d3 * d2
-            if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-                t = d1 / (d1 - d3)
-                u, v, w = 1.0 - t, t, 0.0
-            else:
-                cpx, cpy, cpz = px - cx, py - cy, pz - cz
-                d5 = abx * cpx + aby * cpy + abz * cpz
-                d6 = acx * cpx + acy * cpy + acz * cpz
-                if d6 >= 0.0 and d5 <= d6:
-                    u, v, w = 0.0, 0.0, 1.0
-                else:
-                    vb = d5 * d2 - d1 * d6
-                    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-                        t = d2 / (d2 - d6)
-                        u, v, w = 1.0 - t, 0.0, t
-                    else:
-                        va = d3 * d6 - d5 * d4
-                        if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-                            t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-                            u, v, w = 0.0, 1.0 - t, t
-                        else:
-                            den = va + vb + vc
-                            if den == 0.0:  # degenerate triangle: nearest corner
-                                u, v, w = 1.0, 0.0, 0.0
-                            else:
-                                v = vb / den
-                                w = vc / den
-                                u = 1.0 - v - w
-    qx = u * ax + v * bx + w * cx
-    qy = u * ay + v * by + w * cy
-    qz = u * az + v * bz + w * cz
-    dx, dy, dz = px - qx, py - qy, pz - qz
-    d = dx * dx + dy * dy + dz * dz
-    # a degenerate triangle can hide a nearer corner or edge point: check the corners
-    if d > 0.0 and (u == 1.0 and v == 0.0 and w == 0.0):
-        for k in range(2):
-            ex = bx if k == 0 else cx
-            ey = by if k == 0 else cy
-            ez = bz if k == 0 else cz
-            e = (px - ex) ** 2 + (py - ey) ** 2 + (pz - ez) ** 2
-            if e < d:
-                d = e
-                if k == 0:
-                    u, v, w = 0.0, 1.0, 0.0
-                else:
-                    u, v, w = 0.0, 0.0, 1.0
-    return d, u, v, w
-
-
-@njit(parallel=True, cache=True)
-def _nearest_on_candidates(src_all, s_idx, s_bary, tgt_all, tgt_t, cand, out_d, out_t, out_b):
-    """For each pose and sample (a barycentric combination of three source vertices), the exact
-    distance to the nearest of its candidate target triangles (``cand`` row, -1 padded).
-    Poses are the first axis of ``src_all``/``tgt_all``/``out_*`` (one parallel loop over
-    pose x sample, so short per-pose work is not dominated by thread start-up)."""
-    N = s_idx.shape[0]
-    for fi in prange(src_all.shape[0] * N):
-        f = fi // N
-        i = fi - f * N
-        src_v = src_all[f]
-        tgt_v = tgt_all[f]
-        i0, i1, i2 = s_idx[i, 0], s_idx[i, 1], s_idx[i, 2]
-        b0, b1, b2 = np.float64(s_bary[i, 0]), np.float64(s_bary[i, 1]), np.float64(s_bary[i, 2])
-        px = b0 * np.float64(src_v[i0, 0]) + b1 * np.float64(src_v[i1, 0]) + b2 * np.float64(src_v[i2, 0])
-        py = b0 * np.float64(src_v[i0, 1]) + b1 * np.float64(src_v[i1, 1]) + b2 * np.float64(src_v[i2, 1])
-        pz = b0 * np.float64(src_v[i0, 2]) + b1 * np.float64(src_v[i1, 2]) + b2 * np.float64(src_v[i2, 2])
-        best = np.inf
-        bt = -1
-        bu, bv, bw = 1.0, 0.0, 0.0
-        for c in range(cand.shape[1]):
-            j = cand[i, c]
-            if j < 0:
-                break
-            a, b, cc = tgt_t[j, 0], tgt_t[j, 1], tgt_t[j, 2]
-            d, u, v, w = _closest_on_triangle(
-                px, py, pz,
-                np.float64(tgt_v[a, 0]), np.float64(tgt_v[a, 1]), np.float64(tgt_v[a, 2]),
-                np.float64(tgt_v[b, 0]), np.float64(tgt_v[b, 1]), np.float64(tgt_v[b, 2]),
-                np.float64(tgt_v[cc, 0]), np.float64(tgt_v[cc, 1]), np.float64(tgt_v[cc, 2]))
-            if d < best:
-                best, bt, bu, bv, bw = d, j, u, v, w
-        out_d[f, i] = np.sqrt(best)
-        out_t[f, i] = bt
-        out_b[f, i, 0], out_b[f, i, 1], out_b[f, i, 2] = bu, bv, bw
-
-
 @njit(cache=True, inline="always")
 def _cover(ax, ay, az, bx, by, bz, cx, cy, cz):
     """Covering radius of triangle abc by its corners (see :func:`cover_radius`)."""
@@ -168,20 +93,111 @@ def _cover(ax, ay, az, bx, by, bz, cx, cy, cz):
     return np.sqrt(la * lb * lc) / (2.0 * twice_area)
 
 
+
+
+@njit(cache=True, inline="always")
+def _sample_xyz(v, f, s_idx, s_bary, s):
+    """Sample ``s`` (a barycentric combination of three source vertices) at pose ``f``."""
+    i0, i1, i2 = s_idx[s, 0], s_idx[s, 1], s_idx[s, 2]
+    b0, b1, b2 = s_bary[s, 0], s_bary[s, 1], s_bary[s, 2]
+    x = b0 * np.float64(v[f, i0, 0]) + b1 * np.float64(v[f, i1, 0]) + b2 * np.float64(v[f, i2, 0])
+    y = b0 * np.float64(v[f, i0, 1]) + b1 * np.float64(v[f, i1, 1]) + b2 * np.float64(v[f, i2, 1])
+    z = b0 * np.float64(v[f, i0, 2]) + b1 * np.float64(v[f, i1, 2]) + b2 * np.float64(v[f, i2, 2])
+    return x, y, z
+
+
 @njit(cache=True)
-def _corner_bound(v_all, tri, dv_all, out):
-    # serial: a few flops per triangle (a parallel loop would cost more to compile than it saves)
-    m = tri.shape[0]
-    for ft in range(v_all.shape[0] * m):
-        f = ft // m
-        t = ft - f * m
-        v = v_all[f]
-        dv = dv_all[f]
-        a, b, c = tri[t, 0], tri[t, 1], tri[t, 2]
-        r = _cover(np.float64(v[a, 0]), np.float64(v[a, 1]), np.float64(v[a, 2]),
-                   np.float64(v[b, 0]), np.float64(v[b, 1]), np.float64(v[b, 2]),
-                   np.float64(v[c, 0]), np.float64(v[c, 1]), np.float64(v[c, 2]))
-        out[f, t] = max(dv[a], dv[b], dv[c]) + r
+def _dist2(px, py, pz, tv, tri, j, tmp):
+    """Squared distance from p to target triangle ``j`` of the pose ``tv`` (n, 3).  Not inlined:
+    the runtime's closest-point routine is inlined once here, not at every call site (compile
+    time)."""
+    _closest_on_triangle(px, py, pz, tv, tri[j, 0], tri[j, 1], tri[j, 2], tmp)
+    return (tmp[0] - px) ** 2 + (tmp[1] - py) ** 2 + (tmp[2] - pz) ** 2
+
+
+@njit(cache=True, parallel=True)
+def _sample_distances(sv, tv, pf, ps, s_idx, s_bary, tri, cand, crow, vt_off, vt_tri, walk, out_d, out_t, out_b):
+    """For each pair ``p``: the distance from sample ``ps[p]`` at pose ``pf[p]`` of ``sv``
+    (F, n, 3) to the nearest target triangle of ``cand[crow[p]]`` (-1 ends a row) at the same
+    pose of ``tv``, that triangle and the barycentrics of the nearest point; ``inf`` / -1 for an
+    empty row.  With ``walk > 0``, the search then moves up to ``walk`` times to a nearer
+    triangle sharing a vertex with the current one (CSR ``vt_off`` / ``vt_tri``: the triangles
+    of each target vertex), which finds the nearest triangle when the pose moved it off the
+    candidates."""
+    P = pf.shape[0]
+    for blk in prange((P + BLOCK - 1) // BLOCK):
+        tmp = np.empty(6)
+        for p in range(blk * BLOCK, min(P, (blk + 1) * BLOCK)):
+            f = pf[p]
+            x, y, z = _sample_xyz(sv, f, s_idx, s_bary, ps[p])
+            t = tv[f]
+            best = np.inf
+            bt = -1
+            bu, bv, bw = 1.0, 0.0, 0.0
+            r = crow[p]
+            for c in range(cand.shape[1]):
+                j = cand[r, c]
+                if j < 0:
+                    break
+                d2 = _dist2(x, y, z, t, tri, j, tmp)
+                if d2 < best:
+                    best = d2
+                    bt = j
+                    bu, bv, bw = tmp[3], tmp[4], tmp[5]
+            for _ in range(walk):
+                if bt < 0:
+                    break
+                moved = False
+                cur = bt
+                for k in range(3):
+                    v = tri[cur, k]
+                    for e in range(vt_off[v], vt_off[v + 1]):
+                        j = vt_tri[e]
+                        if j == cur:
+                            continue
+                        d2 = _dist2(x, y, z, t, tri, j, tmp)
+                        if d2 < best:
+                            best = d2
+                            bt = j
+                            bu, bv, bw = tmp[3], tmp[4], tmp[5]
+                            moved = True
+                if not moved:
+                    break
+            out_d[p] = np.sqrt(best)
+            out_t[p] = bt
+            out_b[p, 0], out_b[p, 1], out_b[p, 2] = bu, bv, bw
+
+
+@njit(cache=True, parallel=True)
+def _piece_bounds(sv, tv, pf, pt, ub, given, corners, s_idx, s_bary, near, home, tri, thr, out):
+    """For each pair ``p`` (pose ``pf[p]``, piece ``pt[p]`` with sample corners
+    ``corners[pt[p]]``): ``min(max(u) + cover, max over corners of d(corner, home))`` where the
+    corner bounds ``u`` are ``ub[p]`` when ``given``, else each corner's distance to its own
+    ``near`` triangle; the second term is computed only when the first is above ``thr`` (either
+    is an upper bound)."""
+    P = pf.shape[0]
+    for blk in prange((P + BLOCK - 1) // BLOCK):
+        tmp = np.empty(6)
+        for p in range(blk * BLOCK, min(P, (blk + 1) * BLOCK)):
+            f = pf[p]
+            q = pt[p]
+            c0, c1, c2 = corners[q, 0], corners[q, 1], corners[q, 2]
+            ax, ay, az = _sample_xyz(sv, f, s_idx, s_bary, c0)
+            bx, by, bz = _sample_xyz(sv, f, s_idx, s_bary, c1)
+            cx, cy, cz = _sample_xyz(sv, f, s_idx, s_bary, c2)
+            t = tv[f]
+            if given:
+                u = max(ub[p, 0], ub[p, 1], ub[p, 2])
+            else:
+                u = np.sqrt(max(_dist2(ax, ay, az, t, tri, near[c0], tmp), _dist2(bx, by, bz, t, tri, near[c1], tmp),
+                                _dist2(cx, cy, cz, t, tri, near[c2], tmp)))
+            b = u + _cover(ax, ay, az, bx, by, bz, cx, cy, cz)
+            h = home[q]
+            if b > thr and h >= 0:
+                d = max(_dist2(ax, ay, az, t, tri, h, tmp), _dist2(bx, by, bz, t, tri, h, tmp),
+                        _dist2(cx, cy, cz, t, tri, h, tmp))
+                b = min(b, np.sqrt(d))
+            out[p] = b
 
 
 @njit(cache=True)
@@ -193,25 +209,27 @@ def _cover_many(v_all, tri, out):
         v = v_all[f]
         a, b, c = tri[t, 0], tri[t, 1], tri[t, 2]
         out[f, t] = _cover(np.float64(v[a, 0]), np.float64(v[a, 1]), np.float64(v[a, 2]),
-                        np.float64(v[b, 0]), np.float64(v[b, 1]), np.float64(v[b, 2]),
-                        np.float64(v[c, 0]), np.float64(v[c, 1]), np.float64(v[c, 2]))
+                           np.float64(v[b, 0]), np.float64(v[b, 1]), np.float64(v[b, 2]),
+                           np.float64(v[c, 0]), np.float64(v[c, 1]), np.float64(v[c, 2]))
 
 
 # ------------------------------------------------------------------------------ wrappers
-def _tri_args(v, tri):
-    """Vertices as ``(F, n, 3)`` float32 (bulk geometry; the kernels compute in float64, and one
-    dtype means one compiled signature) and int64 triangles."""
+def _pose_array(v, name: str) -> np.ndarray:
     v = np.ascontiguousarray(v, dtype=np.float32)
-    tri = np.ascontiguousarray(tri, dtype=np.int64)
     if v.ndim == 2:
         v = v[None]
     if v.ndim != 3 or v.shape[2] != 3:
-        raise ValueError(f"vertices: expected shape (n, 3) or (F, n, 3), got {v.shape}")
-    if tri.ndim != 2 or tri.shape[1] != 3:
-        raise ValueError(f"triangles: expected shape (m, 3), got {tri.shape}")
-    if tri.size and (tri.min() < 0 or tri.max() >= v.shape[1]):
-        raise ValueError(f"triangles: expected indices in [0, {v.shape[1]}), got {tri.min()}..{tri.max()}")
-    return v, tri
+        raise ValueError(f"{name}: expected shape (n, 3) or (F, n, 3), got {v.shape}")
+    return v
+
+
+def _index_array(a, name: str, width: int, upper: int) -> np.ndarray:
+    a = np.ascontiguousarray(a, dtype=np.int64)
+    if a.ndim != 2 or a.shape[1] != width:
+        raise ValueError(f"{name}: expected shape (n, {width}), got {a.shape}")
+    if a.size and (a.min() < -1 or a.max() >= upper):
+        raise ValueError(f"{name}: expected indices below {upper}, got {a.min()}..{a.max()}")
+    return a
 
 
 def cover_radius(v: np.ndarray, tri: np.ndarray) -> np.ndarray:
@@ -230,130 +248,515 @@ def cover_radius(v: np.ndarray, tri: np.ndarray) -> np.ndarray:
         sides ``p``, ``q``) ``max(p**2 L / (p**2 + L**2 - q**2), q**2 L / (q**2 + L**2 - p**2))``.
     """
     single = np.ndim(v) == 2
-    v, tri = _tri_args(v, tri)
+    v = _pose_array(v, "vertices")
+    tri = _index_array(tri, "triangles", 3, v.shape[1])
+    if tri.size and tri.min() < 0:
+        raise ValueError("triangles: expected indices >= 0")
     out = np.empty((len(v), len(tri)))
     _cover_many(v, tri, out)
     return out[0] if single else out
 
 
-def triangle_corner_bound(v: np.ndarray, tri: np.ndarray, vertex_distance: np.ndarray) -> np.ndarray:
-    """Upper bound of the distance function over each triangle from its corners' values.
+def vertex_triangles(triangles, n: int):
+    """CSR of the triangles around each vertex: ``(offsets (n + 1,) int64, triangles (3m,) int64)``."""
+    t = np.asarray(triangles, dtype=np.int64)
+    order = np.argsort(t.ravel(), kind="stable")
+    off = np.zeros(n + 1, np.int64)
+    np.cumsum(np.bincount(t.ravel(), minlength=n), out=off[1:])
+    return off, (order // 3).astype(np.int64)
+
+
+def sample_distances(src_v, sample_idx, sample_bary, target_v, target_tri, candidates, pose=None, sample=None,
+                     row=None, walk: int = 0, adjacency=None):
+    """Exact distance from samples to the nearest of their candidate target triangles.
 
     Parameters
     ----------
-    v : (n, 3) or (F, n, 3) float32 vertex positions
-    tri : (m, 3) int
-    vertex_distance : (n,) or (F, n) float64, an upper bound of the distance at each vertex
+    src_v : (n, 3) or (F, n, 3) float32
+        Vertices the samples are made of (F poses).
+    sample_idx : (N, 3) int, sample_bary : (N, 3) float
+        Each sample is ``sum_k bary[k] * src_v[idx[k]]`` (a vertex sample repeats one index).
+    target_v : (n_t, 3) or (F, n_t, 3) float32, target_tri : (m_t, 3) int
+    candidates : (R, k) int
+        Rows of target triangles to try; -1 ends a row early.
+    pose, sample, row : (P,) int, optional
+        The pairs to evaluate: pose index, sample index and candidate row of each (default:
+        every sample on pose 0, row = sample).
+    walk : int
+        After the candidates, move up to this many times to a nearer triangle sharing a vertex
+        with the nearest so far (``adjacency``: :func:`vertex_triangles` of the target).
 
     Returns
     -------
-    (m,) or (F, m) float64: ``max(corner distances) + cover_radius``.
+    distance : (P,) float64
+        An upper bound of the distance to the whole target (exact when the nearest triangle is
+        in the row); ``inf`` for an empty row.
+    triangle : (P,) int64, the nearest candidate (-1 for an empty row).
+    barycentric : (P, 3) float64, the nearest point on it.
     """
-    single = np.ndim(v) == 2
-    v, tri = _tri_args(v, tri)
-    dv = np.ascontiguousarray(vertex_distance, dtype=np.float64).reshape(-1, v.shape[1]) if np.size(vertex_distance) else np.zeros((len(v), 0))
-    if dv.shape != v.shape[:2]:
-        raise ValueError(f"vertex_distance: expected shape {v.shape[:2]}, got {np.shape(vertex_distance)}")
-    out = np.empty((len(v), len(tri)))
-    _corner_bound(v, tri, dv, out)
-    return out[0] if single else out
-
-
-def grid_barycentrics(level: int, corners: bool = True) -> np.ndarray:
-    """Barycentric coordinates of the level-``s`` grid on a triangle.
-
-    Returns ``((s + 1) (s + 2) / 2, 3)`` float64 (without the 3 corners when ``corners`` is
-    False); the grid splits the triangle into ``s**2`` copies of itself scaled by ``1 / s``.
-    """
-    s = int(level)
-    if s < 1:
-        raise ValueError(f"grid level: expected >= 1, got {level}")
-    i, j = np.meshgrid(np.arange(s + 1), np.arange(s + 1), indexing="ij")
-    keep = (i + j) <= s
-    i, j = i[keep], j[keep]
-    b = np.stack([s - i - j, i, j], axis=1) / s
-    if not corners:
-        b = b[(b == 1.0).sum(axis=1) == 0]
-    return b.astype(np.float64)
-
-
-class CandidateQuery:
-    """Samples and candidate triangles checked once, evaluated on many poses (the vertex
-    positions change, the connectivity does not).  See :func:`nearest_on_candidates`."""
-
-    def __init__(self, sample_idx, sample_bary, target_tri, candidates, src_count: int, target_count: int):
-        self.s_idx = np.ascontiguousarray(sample_idx, dtype=np.int64)
-        self.s_bary = np.ascontiguousarray(sample_bary, dtype=np.float64)
-        self.tri = np.ascontiguousarray(target_tri, dtype=np.int64)
-        self.cand = np.ascontiguousarray(candidates, dtype=np.int64)
-        N = len(self.s_idx)
-        if self.s_idx.shape != (N, 3) or self.s_bary.shape != (N, 3):
-            raise ValueError(f"samples: expected (N, 3) indices and barycentrics, got {self.s_idx.shape} "
-                             f"and {self.s_bary.shape}")
-        if N and (self.s_idx.min() < 0 or self.s_idx.max() >= src_count):
-            raise ValueError(f"sample_idx: expected indices in [0, {src_count}), got "
-                             f"{self.s_idx.min()}..{self.s_idx.max()}")
-        if self.tri.ndim != 2 or self.tri.shape[1] != 3:
-            raise ValueError(f"target triangles: expected shape (m, 3), got {self.tri.shape}")
-        if self.tri.size and (self.tri.min() < 0 or self.tri.max() >= target_count):
-            raise ValueError(f"target triangles: expected indices in [0, {target_count}), got "
-                             f"{self.tri.min()}..{self.tri.max()}")
-        if self.cand.ndim != 2 or self.cand.shape[0] != N:
-            raise ValueError(f"candidates: expected shape ({N}, k), got {self.cand.shape}")
-        if self.cand.size and self.cand.max() >= len(self.tri):
-            raise ValueError(f"candidates: expected indices below {len(self.tri)}, got {self.cand.max()}")
-        self.src_count, self.target_count = int(src_count), int(target_count)
-
-    def distances(self, src_v, target_v, full: bool = False):
-        """Distances for one pose (``(n, 3)`` vertices: ``(N,)``) or F poses (``(F, n, 3)``:
-        ``(F, N)``), float64 (``full``: also nearest triangles and barycentrics, as
-        :func:`nearest_on_candidates`)."""
-        single = np.ndim(src_v) == 2
-        src_v = np.ascontiguousarray(src_v, dtype=np.float32)
-        target_v = np.ascontiguousarray(target_v, dtype=np.float32)
-        if single:
-            src_v, target_v = src_v[None], target_v[None]
-        F = len(src_v)
-        if src_v.shape != (F, self.src_count, 3) or target_v.shape != (F, self.target_count, 3):
-            raise ValueError(f"pose vertices: expected ({F}, {self.src_count}, 3) and ({F}, {self.target_count}, 3), "
-                             f"got {src_v.shape} and {target_v.shape}")
-        N = len(self.s_idx)
-        out_d = np.empty((F, N))
-        out_t = np.empty((F, N), np.int64)
-        out_b = np.empty((F, N, 3))
-        _nearest_on_candidates(src_v, self.s_idx, self.s_bary, target_v, self.tri, self.cand, out_d, out_t, out_b)
-        if single:
-            out_d, out_t, out_b = out_d[0], out_t[0], out_b[0]
-        return (out_d, out_t, out_b) if full else out_d
+    sv, tv = _pose_array(src_v, "source vertices"), _pose_array(target_v, "target vertices")
+    if sv.shape[0] != tv.shape[0]:
+        raise ValueError(f"poses: expected as many target poses as source poses ({sv.shape[0]}), got {tv.shape[0]}")
+    s_idx = _index_array(sample_idx, "sample_idx", 3, sv.shape[1])
+    s_bary = np.ascontiguousarray(sample_bary, dtype=np.float64)
+    if s_bary.shape != s_idx.shape or (s_idx.size and s_idx.min() < 0):
+        raise ValueError(f"samples: expected (N, 3) indices >= 0 and barycentrics, got {s_idx.shape} and "
+                         f"{s_bary.shape}")
+    tri = _index_array(target_tri, "target_tri", 3, tv.shape[1])
+    cand = np.ascontiguousarray(candidates, dtype=np.int64)
+    if cand.ndim != 2 or (cand.size and cand.max() >= len(tri)):
+        raise ValueError(f"candidates: expected (R, k) indices below {len(tri)}, got shape {cand.shape}")
+    N = len(s_idx)
+    ps = np.arange(N) if sample is None else np.ascontiguousarray(sample, dtype=np.int64)
+    pf = np.zeros(len(ps), np.int64) if pose is None else np.ascontiguousarray(pose, dtype=np.int64)
+    cr = ps if row is None else np.ascontiguousarray(row, dtype=np.int64)
+    if not (len(pf) == len(ps) == len(cr)):
+        raise ValueError(f"pairs: expected equal lengths, got {len(pf)}, {len(ps)}, {len(cr)}")
+    if len(ps) and (ps.min() < 0 or ps.max() >= N or pf.min() < 0 or pf.max() >= len(sv)
+                    or cr.min() < 0 or cr.max() >= len(cand)):
+        raise ValueError("pairs: pose, sample or row out of range")
+    if walk and adjacency is None:
+        adjacency = vertex_triangles(tri, tv.shape[1])
+    off, vt = adjacency if walk else (np.zeros(1, np.int64), np.zeros(0, np.int64))
+    d = np.empty(len(ps))
+    t = np.empty(len(ps), np.int64)
+    b = np.empty((len(ps), 3))
+    _sample_distances(sv, tv, pf, ps, s_idx, s_bary, tri, cand, cr, np.ascontiguousarray(off, dtype=np.int64),
+                      np.ascontiguousarray(vt, dtype=np.int64), int(walk), d, t, b)
+    return d, t, b
 
 
 def nearest_on_candidates(src_v, sample_idx, sample_bary, target_v, target_tri, candidates):
-    """Exact distance from each sample point to the nearest of its candidate target triangles.
+    """:func:`sample_distances` of every sample on one pose (row = sample)."""
+    return sample_distances(src_v, sample_idx, sample_bary, target_v, target_tri, candidates)
+
+
+def piece_bounds(src_v, sample_idx, sample_bary, target_v, target_tri, corners, near, home, pose, piece,
+                 corner_bounds=None, threshold: float = -np.inf) -> np.ndarray:
+    """Upper bound of the distance to the target over source pieces (triangles of samples).
 
     Parameters
     ----------
-    src_v : (n, 3) float32 (other dtypes are converted)
-        Vertices the samples are made of.
-    sample_idx : (N, 3) int
-        Three source vertices of each sample (a vertex sample repeats one index).
-    sample_bary : (N, 3) float
-        Barycentric weights of the sample on those vertices.
-    target_v : (n_t, 3) float32
-    target_tri : (m_t, 3) int
-    candidates : (N, k) int
-        Target triangles to try for each sample; -1 ends a row early.
+    src_v, sample_idx, sample_bary, target_v, target_tri : as :func:`sample_distances`
+    corners : (Q, 3) int, the three samples of each piece
+    near : (N,) int, a target triangle per sample (its distance bounds the sample's)
+    home : (Q,) int, a target triangle per piece (-1: none)
+    pose, piece : (P,) int, the pairs
+    corner_bounds : (P, 3) float64, optional
+        Upper bounds of the distance at the corners of each pair's piece (default: each corner's
+        distance to its ``near`` triangle).
+    threshold : float
+        The convexity bound is computed only where the Lipschitz bound is above this.
 
     Returns
     -------
-    distance : (N,) float64
-        An upper bound of the distance to the whole target (exact when the nearest triangle is
-        among the candidates); ``inf`` for a sample without candidates.
-    triangle : (N,) int64, the nearest candidate (-1 without candidates).
-    barycentric : (N, 3) float64, the nearest point on it.
+    (P,) float64: ``min(max(corner bounds) + cover, max over corners of d(corner, home))``.
     """
-    src_v = np.asarray(src_v)
-    target_v = np.asarray(target_v)
-    if src_v.ndim != 2 or src_v.shape[1] != 3 or target_v.ndim != 2 or target_v.shape[1] != 3:
-        raise ValueError(f"vertices: expected shapes (n, 3), got {src_v.shape} and {target_v.shape}")
-    q = CandidateQuery(sample_idx, sample_bary, target_tri, candidates, len(src_v), len(target_v))
-    return q.distances(src_v, target_v, full=True)
+    sv, tv = _pose_array(src_v, "source vertices"), _pose_array(target_v, "target vertices")
+    s_idx = _index_array(sample_idx, "sample_idx", 3, sv.shape[1])
+    s_bary = np.ascontiguousarray(sample_bary, dtype=np.float64)
+    tri = _index_array(target_tri, "target_tri", 3, tv.shape[1])
+    c = _index_array(corners, "corners", 3, len(s_idx))
+    nr = np.ascontiguousarray(near, dtype=np.int64)
+    h = np.ascontiguousarray(home, dtype=np.int64)
+    pf = np.ascontiguousarray(pose, dtype=np.int64)
+    pt = np.ascontiguousarray(piece, dtype=np.int64)
+    given = corner_bounds is not None
+    ub = np.ascontiguousarray(corner_bounds, dtype=np.float64) if given else np.zeros((0, 3))
+    if nr.shape != (len(s_idx),) or (nr.size and (nr.min() < 0 or nr.max() >= len(tri))):
+        raise ValueError(f"near: expected ({len(s_idx)},) target triangles, got {nr.shape}")
+    if h.shape != (len(c),) or (h.size and h.max() >= len(tri)):
+        raise ValueError(f"home: expected ({len(c)},) target triangles, got {h.shape}")
+    if pf.shape != pt.shape or (given and ub.shape != (len(pt), 3)):
+        raise ValueError(f"pairs: expected pose, piece (P,) and corner_bounds (P, 3), got {pf.shape}, {pt.shape}, "
+                         f"{ub.shape}")
+    if len(pt) and (pt.min() < 0 or pt.max() >= len(c) or pf.min() < 0 or pf.max() >= len(sv)):
+        raise ValueError("pairs: pose or piece out of range")
+    out = np.empty(len(pt))
+    _piece_bounds(sv, tv, pf, pt, ub, given, c, s_idx, s_bary, nr, h, tri, float(threshold), out)
+    return out
+
+
+# ------------------------------------------------------------------------------ the bound
+@dataclass
+class OneSided:
+    """Upper bound of ``max over x in source of d(x, target)`` on every pose (one direction).
+
+    bound : float, the largest over the poses
+    pose_bound : (F,) float64, an upper bound at each pose
+    worst_pose : int, worst_triangle : int (the source triangle where ``bound`` is reached)
+    sampled : float, the largest distance sampled in this direction (exact distance to the
+        candidate triangles: the truth, unless the candidates missed the nearest triangle)
+    pose_sampled : (F,) float64, the largest distance sampled at each pose (0 where none was)
+    sampled_pose : int, sampled_vertex : int (a source vertex of the sample where ``sampled`` was
+        found)
+    samples : int, sample points made (vertices, then piece corners)
+    pieces : int, pieces made (source triangles and their subdivisions)
+    evaluations : int, (pose, piece) pairs bounded
+    depth : int, the deepest subdivision used
+    exceeded : bool, the search stopped at a distance above ``limit`` (``decide``): ``bound`` and
+        ``pose_bound`` are then not bounds, only ``bound >= sampled > limit`` is known
+    """
+
+    bound: float
+    pose_bound: np.ndarray
+    worst_pose: int
+    worst_triangle: int
+    sampled: float
+    pose_sampled: np.ndarray
+    sampled_pose: int
+    sampled_vertex: int
+    samples: int
+    pieces: int
+    evaluations: int
+    depth: int
+    exceeded: bool = False
+
+
+@dataclass
+class _Shared:
+    """What both directions share: the largest sampled distance and the threshold from it.
+
+    With a ``limit`` the threshold never exceeds it (the bound then stays within the limit
+    wherever the depth allows); ``decide`` only asks whether the bound is within the limit: the
+    threshold is the limit itself, and the work stops as soon as a distance above it is found."""
+
+    sampled: float
+    refine: float
+    resolution: float
+    limit: float = np.inf
+    decide: bool = False
+
+    def threshold(self) -> float:
+        if self.decide:
+            return self.limit
+        return min(self.sampled * (1.0 + self.refine) + self.resolution, self.limit)
+
+    @property
+    def exceeded(self) -> bool:
+        return self.decide and self.sampled > self.limit
+
+
+_CORNER_UV = np.array([[_D, 0], [0, _D], [0, 0]], np.int64)
+
+
+class _Targets:
+    """Candidate target triangles for points on the setup pose: the ``k`` nearest by centroid,
+    widened (k x 4, up to ``MAX_CANDIDATE_SEARCH``) until the nearest triangle is certainly among
+    them (no other centroid is close enough: ``k-th centroid distance - largest triangle radius >=
+    the best distance found``); each row keeps the ``k`` most promising (smallest lower bound
+    ``|x - centroid| - radius``), the nearest first."""
+
+    def __init__(self, t0: np.ndarray, tri: np.ndarray):
+        v = t0.astype(np.float64)[tri]
+        self.tri = tri
+        self.t0 = t0
+        self.c = v.mean(axis=1)
+        self.r = np.linalg.norm(v - self.c[:, None], axis=2).max(axis=1)
+        self.rmax = float(self.r.max()) if len(self.r) else 0.0
+        self.tree = cKDTree(self.c)
+
+    def query(self, points: np.ndarray, k: int):
+        """``(candidates (N, k) int64, nearest (N,) int64)`` for ``points`` (N, 3) float64."""
+        m = len(self.tri)
+        k = int(min(k, m))
+        N = len(points)
+        cand = np.empty((N, k), np.int64)
+        near = np.empty(N, np.int64)
+        todo = np.arange(N)
+        kk = k
+        pts32 = np.ascontiguousarray(points, dtype=np.float32)
+        while len(todo):
+            dd, jj = self.tree.query(points[todo], k=kk)
+            dd, jj = dd.reshape(len(todo), kk), jj.reshape(len(todo), kk).astype(np.int64)
+            n = len(todo)
+            d, t, _ = sample_distances(pts32[todo], np.repeat(np.arange(n)[:, None], 3, 1),
+                                       np.tile(np.array([1.0, 0.0, 0.0]), (n, 1)), self.t0, self.tri, jj)
+            last = kk >= min(m, MAX_CANDIDATE_SEARCH)
+            sure = (dd[:, -1] - self.rmax >= d) | last
+            i = np.flatnonzero(sure)
+            lb = dd[i] - self.r[jj[i]]
+            lb[jj[i] == t[i, None]] = -np.inf       # the nearest first
+            order = np.argsort(lb, axis=1, kind="stable")[:, :k]
+            cand[todo[i]] = np.take_along_axis(jj[i], order, axis=1)
+            near[todo[i]] = t[i]
+            todo = todo[~sure]
+            kk = min(m, kk * 4, MAX_CANDIDATE_SEARCH)
+        return cand, near
+
+
+class _Side:
+    """One direction (source -> target): its samples, pieces, and the bound so far."""
+
+    def __init__(self, src_tri, tgt_tri, s0, t0, k: int, count: int, max_depth: int):
+        self.tri = np.ascontiguousarray(src_tri, dtype=np.int64)
+        self.ttri = np.ascontiguousarray(tgt_tri, dtype=np.int64)
+        self.s0, self.t0 = s0, t0          # (1, n, 3) float32 setup pose
+        self.max_depth = int(max_depth)
+        n, m = s0.shape[1], len(self.tri)
+        self.targets = _Targets(t0[0], self.ttri)
+        self.adjacency = vertex_triangles(self.ttri, t0.shape[1])
+        self.k = int(k)
+        self.s_idx = np.repeat(np.arange(n, dtype=np.int64)[:, None], 3, axis=1)
+        self.s_bary = np.tile(np.array([1.0, 0.0, 0.0]), (n, 1))
+        self.cand, self.near = self.targets.query(s0[0].astype(np.float64), self.k)
+        d = sample_distances(s0, self.s_idx, self.s_bary, t0, self.ttri, self.near[:, None])[0]
+        used = np.zeros(n, bool)
+        used[self.tri.ravel()] = True
+        self.used = np.flatnonzero(used)
+        self.sampled = 0.0
+        self.sampled_at = (0, 0)
+        self.pose_sampled = np.zeros(count)
+        self.saw(np.zeros(len(self.used), np.int64), self.used, d[self.used])
+        self.corners = self.tri.copy()
+        self.src = np.arange(m, dtype=np.int64)
+        self.uv = np.broadcast_to(_CORNER_UV, (m, 3, 2)).copy()
+        self.depth = np.zeros(m, np.int64)
+        self.home = self._homes(self.corners, None)
+        self.pose_bound = np.zeros(count)
+        self.best = (-1.0, 0, 0)
+        self.evaluations = 0
+        self.deepest = 0
+        self.pending = []
+
+    def saw(self, poses, samples, d) -> None:
+        """Exact sampled distances ``d`` of ``samples`` at global ``poses``: the largest found."""
+        if not len(d):
+            return
+        np.maximum.at(self.pose_sampled, poses, d)
+        i = int(np.argmax(d))
+        if d[i] > self.sampled:
+            self.sampled = float(d[i])
+            self.sampled_at = (int(poses[i]), int(samples[i]))
+
+    def _homes(self, corners, parent) -> np.ndarray:
+        """Per piece, the target triangle with the smallest largest corner distance on the setup
+        pose, among its corners' nearest triangles and either the first ``HOME_CANDIDATES``
+        candidates of each corner (source triangles, ``parent`` None: where the surfaces
+        coincide, the triangle under the piece is among them) or the ``parent``'s home."""
+        if parent is None:
+            h = min(HOME_CANDIDATES, self.cand.shape[1])
+            C = np.c_[self.near[corners], self.cand[corners, :h].reshape(len(corners), -1)]
+        else:
+            C = np.c_[self.near[corners], parent]
+        Q, c = C.shape
+        sample = np.repeat(corners, c, axis=1).ravel()           # (q, corner, candidate)
+        rows = np.tile(C, (1, 3)).reshape(-1, 1)
+        d, _, _ = sample_distances(self.s0, self.s_idx, self.s_bary, self.t0, self.ttri, rows,
+                                   sample=sample, row=np.arange(len(sample)))
+        worst = d.reshape(Q, 3, c).max(axis=1)
+        return C[np.arange(Q), np.argmin(worst, axis=1)]
+
+    def split(self, q: np.ndarray) -> np.ndarray:
+        """Four children (midpoint subdivision) of each piece ``q`` (U,); returns (U, 4) ids."""
+        c, uv, src = self.corners[q], self.uv[q], self.src[q]
+        mid_uv = np.stack([(uv[:, 0] + uv[:, 1]) // 2, (uv[:, 1] + uv[:, 2]) // 2, (uv[:, 2] + uv[:, 0]) // 2], 1)
+        base = (_D + 1) ** 2
+        keys = src[:, None] * base + mid_uv[..., 0] * (_D + 1) + mid_uv[..., 1]
+        uk, inv = np.unique(keys.ravel(), return_inverse=True)
+        st, u, v = uk // base, (uk % base) // (_D + 1), uk % (_D + 1)
+        idx = self.tri[st]
+        bary = np.stack([u, v, _D - u - v], axis=1) / _D
+        pts = np.einsum("nk,nkd->nd", bary, self.s0[0].astype(np.float64)[idx])
+        first = len(self.s_idx)
+        cand, near = self.targets.query(pts, self.k)
+        self.s_idx = np.concatenate([self.s_idx, idx])
+        self.s_bary = np.concatenate([self.s_bary, bary])
+        self.cand = np.concatenate([self.cand, cand])
+        self.near = np.concatenate([self.near, near])
+        m = (first + inv).reshape(-1, 3)                      # m01, m12, m20
+        kids = np.stack([np.c_[c[:, 0], m[:, 0], m[:, 2]], np.c_[m[:, 0], c[:, 1], m[:, 1]],
+                         np.c_[m[:, 2], m[:, 1], c[:, 2]], np.c_[m[:, 0], m[:, 1], m[:, 2]]], axis=1)
+        kuv = np.stack([np.stack([uv[:, 0], mid_uv[:, 0], mid_uv[:, 2]], 1),
+                        np.stack([mid_uv[:, 0], uv[:, 1], mid_uv[:, 1]], 1),
+                        np.stack([mid_uv[:, 2], mid_uv[:, 1], uv[:, 2]], 1),
+                        np.stack([mid_uv[:, 0], mid_uv[:, 1], mid_uv[:, 2]], 1)], axis=1)
+        U = len(q)
+        ids = len(self.corners) + np.arange(4 * U).reshape(U, 4)
+        kc = kids.reshape(-1, 3)
+        self.corners = np.concatenate([self.corners, kc])
+        self.uv = np.concatenate([self.uv, kuv.reshape(-1, 3, 2)])
+        self.src = np.concatenate([self.src, np.repeat(src, 4)])
+        self.depth = np.concatenate([self.depth, np.repeat(self.depth[q] + 1, 4)])
+        self.home = np.concatenate([self.home, self._homes(kc, np.repeat(self.home[q], 4))])
+        return ids
+
+    def evaluate(self, sv, tv, ch, lf, q, shared: _Shared, dense: bool):
+        """Bound the pairs (local pose ``lf`` into ``sv``/``tv``, whose global poses are ``ch``,
+        piece ``q``); record the resolved ones, keep the others pending (see the module
+        docstring).  ``dense``: the pieces are source triangles (corners are vertices)."""
+        if not len(q):
+            return
+        gf = ch[lf]
+        self.evaluations += len(q)
+        thr = shared.threshold()
+        B = piece_bounds(sv, self.s_idx, self.s_bary, tv, self.ttri, self.corners, self.near, self.home, lf, q,
+                         threshold=thr)
+        hot = np.flatnonzero(B > thr)
+        if len(hot):
+            # the corners of the pieces above: exact distance to all their candidates, each once
+            N = sv.shape[1] if dense else len(self.s_idx)
+            key = (lf[hot, None] * N + self.corners[q[hot]]).ravel()
+            if dense:
+                mark = np.zeros(sv.shape[0] * N, bool)
+                mark[key] = True
+                uk = np.flatnonzero(mark)
+                inv = (np.cumsum(mark) - 1)[key]
+            else:
+                uk, inv = np.unique(key, return_inverse=True)
+            ef, es = uk // N, uk % N
+            ex = sample_distances(sv, self.s_idx, self.s_bary, tv, self.ttri, self.cand, pose=ef, sample=es, row=es,
+                                  walk=WALK_STEPS, adjacency=self.adjacency)[0]
+            self.saw(ch[ef], es, ex)
+            shared.sampled = max(shared.sampled, self.sampled)
+            thr = shared.threshold()
+            B[hot] = piece_bounds(sv, self.s_idx, self.s_bary, tv, self.ttri, self.corners, self.near, self.home,
+                                  lf[hot], q[hot], corner_bounds=ex[inv].reshape(-1, 3), threshold=thr)
+        done = (B <= thr) | (self.depth[q] >= self.max_depth)
+        self._record(gf[done], q[done], B[done])
+        keep = ~done
+        if keep.any():
+            self.pending.append((gf[keep], q[keep], B[keep]))
+
+    def _record(self, gf, q, B):
+        if not len(B):
+            return
+        np.maximum.at(self.pose_bound, gf, B)
+        i = int(np.argmax(B))
+        if B[i] > self.best[0]:
+            self.best = (float(B[i]), int(gf[i]), int(self.src[q[i]]))
+        self.deepest = max(self.deepest, int(self.depth[q].max()))
+
+    def _take_pending(self):
+        p, self.pending = self.pending, []
+        if not p:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+        return tuple(np.concatenate(x) for x in zip(*p))
+
+    def next_round(self, shared: _Shared):
+        """Pending pairs still above the threshold, split: returns (pose, child piece) pairs."""
+        gf, q, B = self._take_pending()
+        ok = B <= shared.threshold()
+        self._record(gf[ok], q[ok], B[ok])
+        gf, q = gf[~ok], q[~ok]
+        if not len(q):
+            return gf, q
+        uq, inv = np.unique(q, return_inverse=True)
+        kids = self.split(uq)
+        return np.repeat(gf, 4), kids[inv].ravel()
+
+    def result(self, exceeded: bool = False) -> OneSided:
+        if exceeded:  # stopped early: nothing below the measured distance is known
+            self.best = (max(self.best[0], self.sampled), self.sampled_at[0], self.best[2])
+        return OneSided(exceeded=exceeded, bound=max(self.best[0], 0.0), pose_bound=self.pose_bound,
+                        worst_pose=self.best[1], worst_triangle=self.best[2], sampled=self.sampled,
+                        pose_sampled=self.pose_sampled,
+                        sampled_pose=self.sampled_at[0], sampled_vertex=int(self.s_idx[self.sampled_at[1], 0]),
+                        samples=len(self.s_idx), pieces=len(self.corners), evaluations=self.evaluations,
+                        depth=self.deepest)
+
+
+def _pose_chunks(poses: np.ndarray, vertices: int, budget: int):
+    step = max(1, int(budget // max(1, 12 * vertices)))
+    return [poses[i:i + step] for i in range(0, len(poses), step)]
+
+
+def deviation_bound(frames, count: int, tri_a, tri_b, refine: float, resolution: float,
+                    candidates=(8, 16), max_depth: int = 6, probes: int = 8, limit: float | None = None,
+                    decide: bool = False, frame_bytes: int = 128 * 2 ** 20, pair_budget: int = 1_000_000):
+    """Upper bounds of both one-sided distances between two animated surfaces on every pose.
+
+    Parameters
+    ----------
+    frames : callable
+        ``frames(poses)`` ((p,) int) returns ``(a, b)``: ``(p, n_a, 3)`` and ``(p, n_b, 3)``
+        float32 vertex positions of the two surfaces at those poses.  Pose 0 is the setup pose
+        (candidates and home triangles are chosen on it).
+    count : int, the number of poses
+    tri_a, tri_b : (m_a, 3), (m_b, 3) int, the two surfaces' triangles
+    refine : float
+        Pieces are subdivided while their bound is more than this fraction above the largest
+        sampled distance (over both directions and every pose) ...
+    resolution : float
+        ... plus this length.
+    candidates : (k_ab, k_ba)
+        Candidate target triangles per sample for a -> b and for b -> a.
+    max_depth : int, at most ``MAX_DEPTH_LIMIT``
+        Subdivisions at most (a piece at this depth keeps its bound).
+    probes : int
+        Poses (evenly spaced) on which every vertex is measured exactly before the sweep, to
+        start the threshold near the truth.
+    limit : float, optional
+        Subdivide at least until the bound is within ``limit`` (where the depth allows).
+    decide : bool
+        Only decide whether the bound is within ``limit``: subdivide only down to the limit, and
+        stop as soon as a distance above it is measured (the results then say ``exceeded``).
+
+    Returns
+    -------
+    (OneSided a -> b, OneSided b -> a)
+    """
+    if not 0 <= max_depth <= MAX_DEPTH_LIMIT:
+        raise ValueError(f"max_depth: expected 0..{MAX_DEPTH_LIMIT}, got {max_depth}")
+    a0, b0 = frames(np.array([0]))
+    a0, b0 = _pose_array(a0, "frames a"), _pose_array(b0, "frames b")
+    sides = (_Side(tri_a, tri_b, a0, b0, candidates[0], count, max_depth),
+             _Side(tri_b, tri_a, b0, a0, candidates[1], count, max_depth))
+    shared = _Shared(max(s.sampled for s in sides), float(refine), float(resolution),
+                     np.inf if limit is None else float(limit), bool(decide and limit is not None))
+
+    def done():
+        return [s.result(shared.exceeded) for s in sides]
+
+    if shared.exceeded:
+        return done()
+    nv = a0.shape[1] + b0.shape[1]
+    # probes: exact distances of every vertex on a few poses
+    pp = np.unique(np.linspace(0, count - 1, min(count, max(probes, 1))).astype(np.int64))
+    for ch in _pose_chunks(pp, nv, frame_bytes):
+        va, vb = frames(ch)
+        for s, sv, tv in ((sides[0], va, vb), (sides[1], vb, va)):
+            step = max(1, pair_budget // max(len(s.used), 1))
+            for i in range(0, len(ch), step):
+                f = np.repeat(np.arange(i, min(len(ch), i + step)), len(s.used))
+                u = np.tile(s.used, len(f) // max(len(s.used), 1))
+                d = sample_distances(sv, s.s_idx, s.s_bary, tv, s.ttri, s.cand, pose=f, sample=u, row=u,
+                                     walk=WALK_STEPS, adjacency=s.adjacency)[0]
+                s.saw(ch[f], u, d)
+        shared.sampled = max(shared.sampled, *(s.sampled for s in sides))
+        if shared.exceeded:
+            return done()
+    # round 0: every piece (source triangle) on every pose
+    per = max(len(sides[0].tri), len(sides[1].tri), 1)
+    step = max(1, min(pair_budget // per, int(frame_bytes // max(1, 12 * nv))))
+    for lo in range(0, count, step):
+        ch = np.arange(lo, min(count, lo + step))
+        va, vb = frames(ch)
+        for s, sv, tv in ((sides[0], va, vb), (sides[1], vb, va)):
+            m = len(s.tri)
+            s.evaluate(sv, tv, ch, np.repeat(np.arange(len(ch)), m), np.tile(np.arange(m), len(ch)), shared, dense=True)
+        if shared.exceeded:
+            return done()
+    # refinement rounds: the pending pairs split, on the poses where they are above
+    for _ in range(max_depth):
+        todo = []
+        for s in sides:
+            gf, q = s.next_round(shared)
+            order = np.argsort(gf, kind="stable")
+            todo.append((gf[order], q[order]))
+        if not any(len(q) for _, q in todo):
+            break
+        poses = np.unique(np.concatenate([gf for gf, _ in todo]))
+        for ch in _pose_chunks(poses, nv, frame_bytes):
+            va, vb = frames(ch)
+            for (gf, q), s, sv, tv in zip(todo, sides, (va, vb), (vb, va)):
+                i0, i1 = np.searchsorted(gf, ch[0]), np.searchsorted(gf, ch[-1], side="right")
+                for i in range(i0, i1, pair_budget):
+                    j = min(i1, i + pair_budget)
+                    s.evaluate(sv, tv, ch, np.searchsorted(ch, gf[i:j]), q[i:j], shared, dense=False)
+            if shared.exceeded:
+                return done()
+    for s in sides:  # pairs left at the last round keep their bound
+        gf, q, B = s._take_pending()
+        s._record(gf, q, B)
+    return done()
