@@ -115,6 +115,7 @@ def proxy_provenance(report) -> dict:
     out = {}
     for key, value in ((schema.PROXY_SOURCE_FACES, int(c["faces_in"])),
                        (schema.PROXY_MAX_DEVIATION, float(c["deviation"])),
+                       (schema.PROXY_MEASURED_DEVIATION, float(c["sampled_deviation"])),
                        (schema.PROXY_WORST_CLIP, str(w["clip"])), (schema.PROXY_WORST_FRAME, int(w["frame"])),
                        (schema.PROXY_WORST_BONE, str(w["bone"])), (schema.PROXY_WORST_DIRECTION, str(w["direction"]))):
         out[key.split(":")[-1]] = value

@@ -42,12 +42,12 @@ def model_scale(points: np.ndarray) -> float:
     return d if np.isfinite(d) and d > 0 else 1.0
 
 
-#: ``simplify``: height of the step (times the model size) between neighbouring parts in the
-#: embedding the decimator chooses its collapses on.  Collapsing an edge across a part boundary
-#: must move a vertex off the step, which costs about this squared in the quadric error, so such
-#: collapses wait until the rest of the mesh is about this coarse (Unreal's "enforce bone
-#: boundaries" as a penalty, not a wall).
-SIMPLIFY_BONE_BOUNDARY = 2e-3
+#: ``simplify``: height of the step (in mean edge lengths around each vertex) between
+#: neighbouring parts in the embedding the decimator chooses its collapses on.  A collapse across
+#: a part boundary must leave the step, which costs about its height squared in the quadric
+#: error, so such collapses wait until the mesh around is coarse enough (Unreal's "enforce bone
+#: boundaries" as a penalty, not a wall; dropped when it keeps the proxy above its target).
+SIMPLIFY_BONE_BOUNDARY = 0.5
 #: ``simplify``: split a deviation piece (a source triangle or part of one) while its upper bound
 #: is more than this fraction above the largest distance sampled (the bound then over-states the
 #: largest distance found by at most this much, plus the resolution below).

@@ -69,8 +69,8 @@ def summarize(asset: LoadedAsset) -> dict:
     stored), ``clips`` (``[{"name", "frames", "start", "end", "seconds"}]``), ``parts``
     (``[{"index", "joint", "faces", "radius"}]``) and ``provenance`` (the mesh's
     ``customData["colossus"]``, or ``{}``) and ``proxy`` (a simplified proxy's ``sourceFaces``,
-    ``maxDeviation``, ``worstClip``, ``worstFrame``, ``worstBone``, ``worstDirection``; None for a
-    full mesh).
+    ``maxDeviation``, ``measuredDeviation``, ``worstClip``, ``worstFrame``, ``worstBone``,
+    ``worstDirection``; None for a full mesh).
     """
     stage = asset.stage
     tcps = float(stage.GetTimeCodesPerSecond())
@@ -140,6 +140,7 @@ def summarize(asset: LoadedAsset) -> dict:
         g = asset.mesh.GetCustomDataByKey
         out["proxy"] = {"sourceFaces": _plain(g(schema.PROXY_SOURCE_FACES)),
                         "maxDeviation": _plain(g(schema.PROXY_MAX_DEVIATION)),
+                        "measuredDeviation": _plain(g(schema.PROXY_MEASURED_DEVIATION)),
                         "worstClip": _plain(g(schema.PROXY_WORST_CLIP)), "worstFrame": _plain(g(schema.PROXY_WORST_FRAME)),
                         "worstBone": _plain(g(schema.PROXY_WORST_BONE)),
                         "worstDirection": _plain(g(schema.PROXY_WORST_DIRECTION))}
@@ -184,7 +185,9 @@ def format_summary(s: dict) -> str:
         dev = px["maxDeviation"]
         rel = f" ({100 * dev / s['model_size']:.3g}% of size)" if isinstance(dev, float) and s.get("model_size") else ""
         where = ("the bind pose" if px["worstFrame"] in (-1, None) else f"clip {px['worstClip']} frame {px['worstFrame']}")
-        lines.append(f"  deviation     <= {_fmt(dev, '.4g') if isinstance(dev, (int, float)) else '-'}{rel}, worst at "
+        meas = px.get("measuredDeviation")
+        meas = f"{_fmt(meas, '.4g')} measured" if isinstance(meas, (int, float)) else "largest measured"
+        lines.append(f"  deviation     <= {_fmt(dev, '.4g') if isinstance(dev, (int, float)) else '-'}{rel}; {meas} at "
                      f"{where}, bone {px['worstBone'] or '-'} ({px['worstDirection'] or '-'})")
     if s["joints"]:
         lines.append("")

@@ -43,6 +43,9 @@ from scipy.sparse.csgraph import connected_components
 #: A collapse is refused when a face around it would turn by more than acos(FLIP_MIN_COS)
 #: (~78 degrees; Fast-Quadric-Mesh-Simplification's own flip test uses the same 0.2).
 FLIP_MIN_COS = 0.2
+#: Outcome of each collapse of the history (:attr:`Collapsed.outcome`).
+OUTCOMES = ("accepted", "locked end (open border or source defect)", "shell down to a tetrahedron",
+            "ends not joined by a two-face edge", "link condition", "a face would turn over", "not reached")
 #: Quadric placement is regularised towards the centroid by this times the quadric's mean
 #: eigenvalue (keeps flat and creased clusters where their vertices were).
 PLACEMENT_REGULARISATION = 1e-3
@@ -69,11 +72,11 @@ def _normal(P, T, f, a, b, px, py, pz, moved):
 
 @njit(cache=True)
 def _apply(pos, tris, col, locked, vshell, shell_verts, qa, qb, qw, stop_faces, limit, min_cos, reg,
-           out_pos, out_tris, alive, accepted, root):
+           out_pos, out_tris, alive, reason, root):
     """Replay ``col[:limit]`` on ``pos``/``tris`` (see the module docstring).  Writes the final
     positions of every vertex (``out_pos``), the relabelled triangles (``out_tris``), the live
-    faces (``alive``), the accepted collapses and each vertex's merge parent (``root``); returns
-    ``(live faces, collapses looked at)``."""
+    faces (``alive``), each collapse's outcome (``reason``: see :data:`OUTCOMES`) and each vertex's
+    merge parent (``root``); returns ``(live faces, collapses looked at)``."""
     n = pos.shape[0]
     m = tris.shape[0]
     # vertex -> incident corner entries (3 f + k), singly linked; merging appends b's list to a's
@@ -120,7 +123,11 @@ def _apply(pos, tris, col, locked, vshell, shell_verts, qa, qb, qw, stop_faces, 
             break
         looked = i + 1
         a, b = col[i, 0], col[i, 1]
-        if a == b or locked[a] or locked[b] or sv[vshell[a]] <= 4:
+        if a == b or locked[a] or locked[b]:
+            reason[i] = 1
+            continue
+        if sv[vshell[a]] <= 4:
+            reason[i] = 2
             continue
         na = 0
         e = head[a]
@@ -149,6 +156,7 @@ def _apply(pos, tris, col, locked, vshell, shell_verts, qa, qb, qw, stop_faces, 
             if T[f, 0] == a or T[f, 1] == a or T[f, 2] == a:
                 shared += 1
         if shared != 2:
+            reason[i] = 3
             continue
         # link condition: common neighbours (other than a and b themselves) are the two opposite
         common = 0
@@ -160,6 +168,7 @@ def _apply(pos, tris, col, locked, vshell, shell_verts, qa, qb, qw, stop_faces, 
                     mark[v] = stamp  # counted once
                     common += 1
         if common != 2:
+            reason[i] = 4
             continue
         # placement
         w = W[a] + W[b]
@@ -218,6 +227,7 @@ def _apply(pos, tris, col, locked, vshell, shell_verts, qa, qb, qw, stop_faces, 
             if not ok:
                 break
         if not ok:
+            reason[i] = 5
             continue
         # accept
         for s in range(nb):
@@ -246,7 +256,7 @@ def _apply(pos, tris, col, locked, vshell, shell_verts, qa, qb, qw, stop_faces, 
         R[a] = rad
         sv[vshell[a]] -= 1
         root[b] = a
-        accepted[i] = True
+        reason[i] = 0
         live -= 2
     return live, looked
 
@@ -321,6 +331,7 @@ class Collapsed:
     vertex_map : (n,) int64, the proxy vertex each input vertex was merged into (-1: in no live face)
     accepted : (k,) bool, which collapses of the history were applied
     looked_at : int, collapses looked at (the rest of the history was not reached)
+    outcome : (k,) int8, index into :data:`OUTCOMES` per collapse
     """
 
     positions: np.ndarray
@@ -328,6 +339,12 @@ class Collapsed:
     vertex_map: np.ndarray
     accepted: np.ndarray
     looked_at: int
+    outcome: np.ndarray
+
+    def refusals(self) -> dict:
+        """``{reason: count}`` of the collapses looked at and refused."""
+        c = np.bincount(self.outcome[:self.looked_at], minlength=len(OUTCOMES))
+        return {OUTCOMES[i]: int(c[i]) for i in range(1, len(OUTCOMES) - 1) if c[i]}
 
 
 def apply_collapses(positions, triangles, collapses, stop_faces: int = 0, limit: int | None = None,
@@ -383,11 +400,11 @@ def apply_collapses(positions, triangles, collapses, stop_faces: int = 0, limit:
     out_pos = np.empty_like(pos)
     out_tri = np.empty_like(tri)
     alive = np.empty(m, np.bool_)
-    accepted = np.zeros(len(col), np.bool_)
+    outcome = np.full(len(col), len(OUTCOMES) - 1, np.int8)
     root = np.empty(n, np.int64)
     _, looked = _apply(pos, tri, col, locked, vs, shell_verts, np.ascontiguousarray(A, dtype=np.float64),
            np.ascontiguousarray(b, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64),
-           int(stop_faces), k, float(min_cos), PLACEMENT_REGULARISATION, out_pos, out_tri, alive, accepted, root)
+           int(stop_faces), k, float(min_cos), PLACEMENT_REGULARISATION, out_pos, out_tri, alive, outcome, root)
     # merge parents -> final cluster root
     while True:
         r2 = root[root]
@@ -398,4 +415,4 @@ def apply_collapses(positions, triangles, collapses, stop_faces: int = 0, limit:
     verts = np.unique(t)
     new = np.full(n, -1, np.int64)
     new[verts] = np.arange(len(verts))
-    return Collapsed(out_pos[verts].astype(np.float32), new[t], new[root], accepted, looked)
+    return Collapsed(out_pos[verts].astype(np.float32), new[t], new[root], outcome == 0, looked, outcome)
