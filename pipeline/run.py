@@ -122,6 +122,21 @@ def proxy_provenance(report) -> dict:
     return out
 
 
+def settings_from_provenance(provenance) -> ImportSettings:
+    """The :class:`ImportSettings` an asset was made with, from its provenance's ``settings``
+    (``""`` stands for None there); unknown keys are ignored."""
+    from dataclasses import fields
+
+    given = dict((provenance or {}).get("settings") or {})
+    kw = {}
+    for f in fields(ImportSettings):
+        v = given.get(f.name)
+        if v in (None, ""):
+            continue
+        kw[f.name] = list(v) if f.name == "meshes" else v
+    return ImportSettings(**kw)
+
+
 def sha256_of(path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as fh:
@@ -130,11 +145,14 @@ def sha256_of(path) -> str:
     return h.hexdigest()
 
 
-def build_collider(src, settings: ImportSettings | None = None, progress=None):
+def build_collider(src, settings: ImportSettings | None = None, progress=None, stop_after: str | None = None):
     """Run every stage but ``write``: returns ``(mesh, reports)``.
 
-    ``progress(i, n, stage)`` is called before each stage when given.
+    ``progress(i, n, stage)`` is called before each stage when given.  ``stop_after`` ends the
+    run after that stage (e.g. ``"bind"``: the full mesh a proxy is simplified from).
     """
+    if stop_after is not None and stop_after not in STAGES:
+        raise ValueError(f"stop_after: expected one of {STAGES}, got {stop_after!r}")
     s = settings or ImportSettings()
     s.check()
     reports = []
@@ -172,6 +190,8 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None):
     mesh = step("weld", lambda: weld(mesh))
     mesh = step("orient", lambda: orient(mesh))
     mesh = step("bind", lambda: bind(mesh, s.max_influences, s.unweighted))
+    if stop_after == "bind":
+        return mesh, reports
     if s.proxy:
         mesh = step("simplify", lambda: simplify(mesh, s.target_faces, s.max_deviation, s.max_influences))
     mesh = step("parts", lambda: parts(mesh, s.parts, s.min_part_faces, s.parts_threshold))

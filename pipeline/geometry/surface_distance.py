@@ -56,9 +56,9 @@ BLOCK = 512
 #: Exact distances on poses other than the setup pose walk at most this many steps to nearer
 #: neighbouring triangles after the candidates.
 WALK_STEPS = 8
-#: A piece's home triangle is chosen among its corners' nearest triangles and this many of each
-#: corner's candidates.
-HOME_CANDIDATES = 6
+#: A source triangle's home is chosen among its corners' nearest triangles and the first three
+#: target triangles in the first this many candidates of all three corners.
+HOME_CANDIDATES = 8
 #: Candidate searches widen up to this many nearest centroids.
 MAX_CANDIDATE_SEARCH = 32
 #: Integer barycentric resolution of the pieces: 2**MAX_DEPTH_LIMIT subdivisions per side at most.
@@ -121,9 +121,9 @@ def _sample_distances(sv, tv, pf, ps, s_idx, s_bary, tri, cand, crow, vt_off, vt
     (F, n, 3) to the nearest target triangle of ``cand[crow[p]]`` (-1 ends a row) at the same
     pose of ``tv``, that triangle and the barycentrics of the nearest point; ``inf`` / -1 for an
     empty row.  With ``walk > 0``, the search then moves up to ``walk`` times to a nearer
-    triangle sharing a vertex with the current one (CSR ``vt_off`` / ``vt_tri``: the triangles
+    triangle sharing a corner with the current one (CSR ``vt_off`` / ``vt_tri``: the triangles
     of each target vertex), which finds the nearest triangle when the pose moved it off the
-    candidates."""
+    candidates (stopping where a nearest point is inside its triangle would miss folds)."""
     P = pf.shape[0]
     for blk in prange((P + BLOCK - 1) // BLOCK):
         tmp = np.empty(6)
@@ -147,7 +147,6 @@ def _sample_distances(sv, tv, pf, ps, s_idx, s_bary, tri, cand, crow, vt_off, vt
             for _ in range(walk):
                 if bt < 0:
                     break
-                moved = False
                 cur = bt
                 for k in range(3):
                     v = tri[cur, k]
@@ -160,8 +159,7 @@ def _sample_distances(sv, tv, pf, ps, s_idx, s_bary, tri, cand, crow, vt_off, vt
                             best = d2
                             bt = j
                             bu, bv, bw = tmp[3], tmp[4], tmp[5]
-                            moved = True
-                if not moved:
+                if bt == cur:
                     break
             out_d[p] = np.sqrt(best)
             out_t[p] = bt
@@ -169,12 +167,12 @@ def _sample_distances(sv, tv, pf, ps, s_idx, s_bary, tri, cand, crow, vt_off, vt
 
 
 @njit(cache=True, parallel=True)
-def _piece_bounds(sv, tv, pf, pt, ub, given, corners, s_idx, s_bary, near, home, tri, thr, out):
+def _piece_bounds(sv, tv, pf, pt, ub, given, corners, s_idx, s_bary, near, home, tri, thr, out, out_cover):
     """For each pair ``p`` (pose ``pf[p]``, piece ``pt[p]`` with sample corners
     ``corners[pt[p]]``): ``min(max(u) + cover, max over corners of d(corner, home))`` where the
     corner bounds ``u`` are ``ub[p]`` when ``given``, else each corner's distance to its own
     ``near`` triangle; the second term is computed only when the first is above ``thr`` (either
-    is an upper bound)."""
+    is an upper bound).  ``out_cover``: the piece's cover radius at that pose."""
     P = pf.shape[0]
     for blk in prange((P + BLOCK - 1) // BLOCK):
         tmp = np.empty(6)
@@ -191,7 +189,9 @@ def _piece_bounds(sv, tv, pf, pt, ub, given, corners, s_idx, s_bary, near, home,
             else:
                 u = np.sqrt(max(_dist2(ax, ay, az, t, tri, near[c0], tmp), _dist2(bx, by, bz, t, tri, near[c1], tmp),
                                 _dist2(cx, cy, cz, t, tri, near[c2], tmp)))
-            b = u + _cover(ax, ay, az, bx, by, bz, cx, cy, cz)
+            r = _cover(ax, ay, az, bx, by, bz, cx, cy, cz)
+            out_cover[p] = r
+            b = u + r
             h = home[q]
             if b > thr and h >= 0:
                 d = max(_dist2(ax, ay, az, t, tri, h, tmp), _dist2(bx, by, bz, t, tri, h, tmp),
@@ -267,7 +267,7 @@ def vertex_triangles(triangles, n: int):
 
 
 def sample_distances(src_v, sample_idx, sample_bary, target_v, target_tri, candidates, pose=None, sample=None,
-                     row=None, walk: int = 0, adjacency=None):
+                     row=None, walk: int = 0, fans=None):
     """Exact distance from samples to the nearest of their candidate target triangles.
 
     Parameters
@@ -284,7 +284,8 @@ def sample_distances(src_v, sample_idx, sample_bary, target_v, target_tri, candi
         every sample on pose 0, row = sample).
     walk : int
         After the candidates, move up to this many times to a nearer triangle sharing a vertex
-        with the nearest so far (``adjacency``: :func:`vertex_triangles` of the target).
+        around the corners the nearest point so far touches (``fans``: :func:`vertex_triangles`
+        of the target, computed when not given).
 
     Returns
     -------
@@ -315,9 +316,9 @@ def sample_distances(src_v, sample_idx, sample_bary, target_v, target_tri, candi
     if len(ps) and (ps.min() < 0 or ps.max() >= N or pf.min() < 0 or pf.max() >= len(sv)
                     or cr.min() < 0 or cr.max() >= len(cand)):
         raise ValueError("pairs: pose, sample or row out of range")
-    if walk and adjacency is None:
-        adjacency = vertex_triangles(tri, tv.shape[1])
-    off, vt = adjacency if walk else (np.zeros(1, np.int64), np.zeros(0, np.int64))
+    if walk and fans is None:
+        fans = vertex_triangles(tri, tv.shape[1])
+    off, vt = fans if walk else (np.zeros(1, np.int64), np.zeros(0, np.int64))
     d = np.empty(len(ps))
     t = np.empty(len(ps), np.int64)
     b = np.empty((len(ps), 3))
@@ -332,7 +333,7 @@ def nearest_on_candidates(src_v, sample_idx, sample_bary, target_v, target_tri, 
 
 
 def piece_bounds(src_v, sample_idx, sample_bary, target_v, target_tri, corners, near, home, pose, piece,
-                 corner_bounds=None, threshold: float = -np.inf) -> np.ndarray:
+                 corner_bounds=None, threshold: float = -np.inf, cover=False):
     """Upper bound of the distance to the target over source pieces (triangles of samples).
 
     Parameters
@@ -348,9 +349,13 @@ def piece_bounds(src_v, sample_idx, sample_bary, target_v, target_tri, corners, 
     threshold : float
         The convexity bound is computed only where the Lipschitz bound is above this.
 
+    cover : bool
+        Also return each pair's cover radius.
+
     Returns
     -------
-    (P,) float64: ``min(max(corner bounds) + cover, max over corners of d(corner, home))``.
+    (P,) float64: ``min(max(corner bounds) + cover, max over corners of d(corner, home))``
+    (and ``(P,)`` float64 cover radii with ``cover``).
     """
     sv, tv = _pose_array(src_v, "source vertices"), _pose_array(target_v, "target vertices")
     s_idx = _index_array(sample_idx, "sample_idx", 3, sv.shape[1])
@@ -373,8 +378,9 @@ def piece_bounds(src_v, sample_idx, sample_bary, target_v, target_tri, corners, 
     if len(pt) and (pt.min() < 0 or pt.max() >= len(c) or pf.min() < 0 or pf.max() >= len(sv)):
         raise ValueError("pairs: pose or piece out of range")
     out = np.empty(len(pt))
-    _piece_bounds(sv, tv, pf, pt, ub, given, c, s_idx, s_bary, nr, h, tri, float(threshold), out)
-    return out
+    rad = np.empty(len(pt))
+    _piece_bounds(sv, tv, pf, pt, ub, given, c, s_idx, s_bary, nr, h, tri, float(threshold), out, rad)
+    return (out, rad) if cover else out
 
 
 # ------------------------------------------------------------------------------ the bound
@@ -467,7 +473,7 @@ class _Targets:
         kk = k
         pts32 = np.ascontiguousarray(points, dtype=np.float32)
         while len(todo):
-            dd, jj = self.tree.query(points[todo], k=kk)
+            dd, jj = self.tree.query(points[todo], k=kk, workers=-1)
             dd, jj = dd.reshape(len(todo), kk), jj.reshape(len(todo), kk).astype(np.int64)
             n = len(todo)
             d, t, _ = sample_distances(pts32[todo], np.repeat(np.arange(n)[:, None], 3, 1),
@@ -495,7 +501,7 @@ class _Side:
         self.max_depth = int(max_depth)
         n, m = s0.shape[1], len(self.tri)
         self.targets = _Targets(t0[0], self.ttri)
-        self.adjacency = vertex_triangles(self.ttri, t0.shape[1])
+        self.fans = vertex_triangles(self.ttri, t0.shape[1])
         self.k = int(k)
         self.s_idx = np.repeat(np.arange(n, dtype=np.int64)[:, None], 3, axis=1)
         self.s_bary = np.tile(np.array([1.0, 0.0, 0.0]), (n, 1))
@@ -531,12 +537,16 @@ class _Side:
 
     def _homes(self, corners, parent) -> np.ndarray:
         """Per piece, the target triangle with the smallest largest corner distance on the setup
-        pose, among its corners' nearest triangles and either the first ``HOME_CANDIDATES``
-        candidates of each corner (source triangles, ``parent`` None: where the surfaces
-        coincide, the triangle under the piece is among them) or the ``parent``'s home."""
+        pose, among its corners' nearest triangles and either the first three triangles in all
+        three corners' candidate rows (source triangles, ``parent`` None: where the surfaces
+        coincide, the triangle under the piece is one of them) or the ``parent``'s home."""
         if parent is None:
             h = min(HOME_CANDIDATES, self.cand.shape[1])
-            C = np.c_[self.near[corners], self.cand[corners, :h].reshape(len(corners), -1)]
+            r0, r1, r2 = (self.cand[corners[:, i], :h] for i in range(3))
+            common = (r0[:, :, None] == r1[:, None, :]).any(2) & (r0[:, :, None] == r2[:, None, :]).any(2)
+            pick = np.argsort(~common, axis=1, kind="stable")[:, :3]           # the first three in common
+            both = np.take_along_axis(common, pick, 1)
+            C = np.c_[self.near[corners], np.where(both, np.take_along_axis(r0, pick, 1), self.near[corners[:, :1]])]
         else:
             C = np.c_[self.near[corners], parent]
         Q, c = C.shape
@@ -590,9 +600,21 @@ class _Side:
         gf = ch[lf]
         self.evaluations += len(q)
         thr = shared.threshold()
-        B = piece_bounds(sv, self.s_idx, self.s_bary, tv, self.ttri, self.corners, self.near, self.home, lf, q,
-                         threshold=thr)
-        hot = np.flatnonzero(B > thr)
+        if dense:  # each vertex once per pose: its distance to its nearest triangle
+            F = sv.shape[0]
+            vf = np.repeat(np.arange(F), len(self.used))
+            vs = np.tile(self.used, F)
+            ub = np.zeros((F, sv.shape[1]))
+            ub[vf, vs] = sample_distances(sv, self.s_idx, self.s_bary, tv, self.ttri, self.near[:, None],
+                                          pose=vf, sample=vs, row=vs)[0]
+            corner_ub = ub[lf[:, None], self.corners[q]]
+        else:
+            corner_ub = None
+        B, rad = piece_bounds(sv, self.s_idx, self.s_bary, tv, self.ttri, self.corners, self.near, self.home, lf, q,
+                              corner_bounds=corner_ub, threshold=thr, cover=True)
+        # exact corner distances can only lower the Lipschitz term to (corner bounds) + cover: not
+        # worth it for a piece whose cover alone is above the threshold (it is split anyway)
+        hot = np.flatnonzero((B > thr) & (rad < thr))
         if len(hot):
             # the corners of the pieces above: exact distance to all their candidates, each once
             N = sv.shape[1] if dense else len(self.s_idx)
@@ -606,7 +628,7 @@ class _Side:
                 uk, inv = np.unique(key, return_inverse=True)
             ef, es = uk // N, uk % N
             ex = sample_distances(sv, self.s_idx, self.s_bary, tv, self.ttri, self.cand, pose=ef, sample=es, row=es,
-                                  walk=WALK_STEPS, adjacency=self.adjacency)[0]
+                                  walk=WALK_STEPS, fans=self.fans)[0]
             self.saw(ch[ef], es, ex)
             shared.sampled = max(shared.sampled, self.sampled)
             thr = shared.threshold()
@@ -721,7 +743,7 @@ def deviation_bound(frames, count: int, tri_a, tri_b, refine: float, resolution:
                 f = np.repeat(np.arange(i, min(len(ch), i + step)), len(s.used))
                 u = np.tile(s.used, len(f) // max(len(s.used), 1))
                 d = sample_distances(sv, s.s_idx, s.s_bary, tv, s.ttri, s.cand, pose=f, sample=u, row=u,
-                                     walk=WALK_STEPS, adjacency=s.adjacency)[0]
+                                     walk=WALK_STEPS, fans=s.fans)[0]
                 s.saw(ch[f], u, d)
         shared.sampled = max(shared.sampled, *(s.sampled for s in sides))
         if shared.exceeded:
