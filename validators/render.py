@@ -385,7 +385,7 @@ class Renderer:
         self.marks.SetVisibility(bool(len(pose.outside)))
         label = pose.label
         if self.source is not None:
-            label += f"\nfaint grey: the full mesh ({len(self.source.faces) // 4} faces)"
+            label += f"\nfaint grey: the full mesh ({len(self.source.faces) // 4} faces) where it lies outside"
         if pose.failing.any():
             names = ", ".join(self.asset.part_joints[p].rsplit("/", 1)[-1] for p in np.nonzero(pose.failing)[0])
             label += f"\nFAIL: {names} ({len(pose.outside)} vertices outside)"

@@ -37,7 +37,9 @@ all their candidates.  Both directions share one skinning per pose chunk (``fram
 Kernels (private, ``_``-prefixed; readable references in ``tests/naive.py``)
 --------------------------------------------------------------------------
 ``_sample_distances``: for (pose, sample) pairs, the distance to the nearest of a candidate row;
-``_piece_bounds``: for (pose, piece) pairs, the smaller of the two bounds above.  Ericson's
+``_piece_bounds``: for (pose, piece) pairs, the smaller of the two bounds above;
+``_all_triangle_bounds``: the same for every source triangle on every pose of a chunk (each
+vertex's distance to its home triangle computed once per pose).  Ericson's
 closest point on a triangle is the runtime's (:mod:`runtime.kernels`), the one copy of it.
 """
 
@@ -198,6 +200,49 @@ def _piece_bounds(sv, tv, pf, pt, ub, given, corners, s_idx, s_bary, near, home,
                         _dist2(cx, cy, cz, t, tri, h, tmp))
                 b = min(b, np.sqrt(d))
             out[p] = b
+
+
+@njit(cache=True, parallel=True)
+def _all_triangle_bounds(sv, tv, stri, near, home, ttri, thr, ub, out, out_cover):
+    """Every source triangle ``stri`` on every pose of ``sv`` (F, n, 3): first ``ub`` (F, n), each
+    vertex's distance to its ``near`` target triangle, then ``out`` (F, m), the smaller of the
+    Lipschitz bound (largest corner ``ub`` + cover) and, where that is above ``thr``, the
+    convexity bound on the triangle's ``home``; ``out_cover`` (F, m) the cover radii."""
+    F, n = ub.shape
+    m = stri.shape[0]
+    nb = (n + BLOCK - 1) // BLOCK
+    for task in prange(F * nb):
+        f = task // nb
+        lo = (task - f * nb) * BLOCK
+        tmp = np.empty(6)
+        t = tv[f]
+        for v in range(lo, min(n, lo + BLOCK)):
+            j = near[v]
+            if j < 0:
+                ub[f, v] = 0.0
+            else:
+                ub[f, v] = np.sqrt(_dist2(np.float64(sv[f, v, 0]), np.float64(sv[f, v, 1]), np.float64(sv[f, v, 2]),
+                                          t, ttri, j, tmp))
+    mb = (m + BLOCK - 1) // BLOCK
+    for task in prange(F * mb):
+        f = task // mb
+        lo = (task - f * mb) * BLOCK
+        tmp = np.empty(6)
+        t = tv[f]
+        for q in range(lo, min(m, lo + BLOCK)):
+            a, b, c = stri[q, 0], stri[q, 1], stri[q, 2]
+            ax, ay, az = np.float64(sv[f, a, 0]), np.float64(sv[f, a, 1]), np.float64(sv[f, a, 2])
+            bx, by, bz = np.float64(sv[f, b, 0]), np.float64(sv[f, b, 1]), np.float64(sv[f, b, 2])
+            cx, cy, cz = np.float64(sv[f, c, 0]), np.float64(sv[f, c, 1]), np.float64(sv[f, c, 2])
+            r = _cover(ax, ay, az, bx, by, bz, cx, cy, cz)
+            bnd = max(ub[f, a], ub[f, b], ub[f, c]) + r
+            h = home[q]
+            if bnd > thr and h >= 0:
+                d = max(_dist2(ax, ay, az, t, ttri, h, tmp), _dist2(bx, by, bz, t, ttri, h, tmp),
+                        _dist2(cx, cy, cz, t, ttri, h, tmp))
+                bnd = min(bnd, np.sqrt(d))
+            out[f, q] = bnd
+            out_cover[f, q] = r
 
 
 @njit(cache=True)
@@ -381,6 +426,43 @@ def piece_bounds(src_v, sample_idx, sample_bary, target_v, target_tri, corners, 
     rad = np.empty(len(pt))
     _piece_bounds(sv, tv, pf, pt, ub, given, c, s_idx, s_bary, nr, h, tri, float(threshold), out, rad)
     return (out, rad) if cover else out
+
+
+def triangle_bounds(src_v, src_tri, target_v, target_tri, near, home, threshold: float = -np.inf):
+    """:func:`piece_bounds` of every source triangle on every pose, the corner bounds being each
+    vertex's distance to its ``near`` target triangle.
+
+    Parameters
+    ----------
+    src_v : (F, n, 3) float32, src_tri : (m, 3) int
+    target_v : (F, n_t, 3) float32, target_tri : (m_t, 3) int
+    near : (n,) int, a target triangle per source vertex (-1: none, bound 0: a vertex of no triangle)
+    home : (m,) int, a target triangle per source triangle (-1: none)
+    threshold : float, the convexity bound is computed only where the Lipschitz bound is above it
+
+    Returns
+    -------
+    bound : (F, m) float64, cover : (F, m) float64, vertex_bound : (F, n) float64
+    """
+    sv, tv = _pose_array(src_v, "source vertices"), _pose_array(target_v, "target vertices")
+    if sv.shape[0] != tv.shape[0]:
+        raise ValueError(f"poses: expected as many target poses as source poses ({sv.shape[0]}), got {tv.shape[0]}")
+    stri = _index_array(src_tri, "src_tri", 3, sv.shape[1])
+    ttri = _index_array(target_tri, "target_tri", 3, tv.shape[1])
+    nr = np.ascontiguousarray(near, dtype=np.int64)
+    h = np.ascontiguousarray(home, dtype=np.int64)
+    if nr.shape != (sv.shape[1],) or (nr.size and nr.max() >= len(ttri)):
+        raise ValueError(f"near: expected ({sv.shape[1]},) target triangles, got {nr.shape}")
+    if h.shape != (len(stri),) or (h.size and h.max() >= len(ttri)):
+        raise ValueError(f"home: expected ({len(stri)},) target triangles, got {h.shape}")
+    if (stri.size and stri.min() < 0) or (ttri.size and ttri.min() < 0):
+        raise ValueError("triangles: expected indices >= 0")
+    F = sv.shape[0]
+    ub = np.empty((F, sv.shape[1]))
+    out = np.empty((F, len(stri)))
+    rad = np.empty((F, len(stri)))
+    _all_triangle_bounds(sv, tv, stri, nr, h, ttri, float(threshold), ub, out, rad)
+    return out, rad, ub
 
 
 # ------------------------------------------------------------------------------ the bound
@@ -591,41 +673,24 @@ class _Side:
         self.home = np.concatenate([self.home, self._homes(kc, np.repeat(self.home[q], 4))])
         return ids
 
-    def evaluate(self, sv, tv, ch, lf, q, shared: _Shared, dense: bool):
+    def evaluate(self, sv, tv, ch, lf, q, shared: _Shared):
         """Bound the pairs (local pose ``lf`` into ``sv``/``tv``, whose global poses are ``ch``,
         piece ``q``); record the resolved ones, keep the others pending (see the module
-        docstring).  ``dense``: the pieces are source triangles (corners are vertices)."""
+        docstring)."""
         if not len(q):
             return
         gf = ch[lf]
         self.evaluations += len(q)
         thr = shared.threshold()
-        if dense:  # each vertex once per pose: its distance to its nearest triangle
-            F = sv.shape[0]
-            vf = np.repeat(np.arange(F), len(self.used))
-            vs = np.tile(self.used, F)
-            ub = np.zeros((F, sv.shape[1]))
-            ub[vf, vs] = sample_distances(sv, self.s_idx, self.s_bary, tv, self.ttri, self.near[:, None],
-                                          pose=vf, sample=vs, row=vs)[0]
-            corner_ub = ub[lf[:, None], self.corners[q]]
-        else:
-            corner_ub = None
         B, rad = piece_bounds(sv, self.s_idx, self.s_bary, tv, self.ttri, self.corners, self.near, self.home, lf, q,
-                              corner_bounds=corner_ub, threshold=thr, cover=True)
+                              threshold=thr, cover=True)
         # exact corner distances can only lower the Lipschitz term to (corner bounds) + cover: not
         # worth it for a piece whose cover alone is above the threshold (it is split anyway)
         hot = np.flatnonzero((B > thr) & (rad < thr))
         if len(hot):
             # the corners of the pieces above: exact distance to all their candidates, each once
-            N = sv.shape[1] if dense else len(self.s_idx)
-            key = (lf[hot, None] * N + self.corners[q[hot]]).ravel()
-            if dense:
-                mark = np.zeros(sv.shape[0] * N, bool)
-                mark[key] = True
-                uk = np.flatnonzero(mark)
-                inv = (np.cumsum(mark) - 1)[key]
-            else:
-                uk, inv = np.unique(key, return_inverse=True)
+            N = len(self.s_idx)
+            uk, inv = np.unique((lf[hot, None] * N + self.corners[q[hot]]).ravel(), return_inverse=True)
             ef, es = uk // N, uk % N
             ex = sample_distances(sv, self.s_idx, self.s_bary, tv, self.ttri, self.cand, pose=ef, sample=es, row=es,
                                   walk=WALK_STEPS, fans=self.fans)[0]
@@ -639,6 +704,39 @@ class _Side:
         keep = ~done
         if keep.any():
             self.pending.append((gf[keep], q[keep], B[keep]))
+
+    def evaluate_all(self, sv, tv, ch, shared: _Shared):
+        """Round 0: every source triangle on every pose of the chunk (global poses ``ch``), with
+        the dense kernel; records the resolved ones, keeps the others pending."""
+        F, m, n = sv.shape[0], len(self.tri), sv.shape[1]
+        self.evaluations += F * m
+        thr = shared.threshold()
+        B, rad, _ = triangle_bounds(sv, self.tri, tv, self.ttri, self.near[:n], self.home[:m], threshold=thr)
+        fh, th = np.nonzero((B > thr) & (rad < thr))
+        if len(fh):
+            key = (fh[:, None] * n + self.tri[th]).ravel()
+            mark = np.zeros(F * n, bool)
+            mark[key] = True
+            uk = np.flatnonzero(mark)
+            inv = (np.cumsum(mark) - 1)[key]
+            ef, es = uk // n, uk % n
+            ex = sample_distances(sv, self.s_idx, self.s_bary, tv, self.ttri, self.cand, pose=ef, sample=es, row=es,
+                                  walk=WALK_STEPS, fans=self.fans)[0]
+            self.saw(ch[ef], es, ex)
+            shared.sampled = max(shared.sampled, self.sampled)
+            thr = shared.threshold()
+            B[fh, th] = piece_bounds(sv, self.s_idx, self.s_bary, tv, self.ttri, self.corners, self.near, self.home,
+                                     fh, th, corner_bounds=ex[inv].reshape(-1, 3), threshold=thr)
+        done = B <= thr if self.max_depth > 0 else np.ones_like(B, bool)
+        low = np.where(done, B, -np.inf)
+        top = low.max(axis=1)
+        self.pose_bound[ch] = np.maximum(self.pose_bound[ch], top)
+        f = int(np.argmax(top))
+        if top[f] > self.best[0]:
+            self.best = (float(top[f]), int(ch[f]), int(np.argmax(low[f])))
+        pf, pq = np.nonzero(~done)
+        if len(pf):
+            self.pending.append((ch[pf], pq, B[pf, pq]))
 
     def _record(self, gf, q, B):
         if not len(B):
@@ -750,13 +848,12 @@ def deviation_bound(frames, count: int, tri_a, tri_b, refine: float, resolution:
             return done()
     # round 0: every piece (source triangle) on every pose
     per = max(len(sides[0].tri), len(sides[1].tri), 1)
-    step = max(1, min(pair_budget // per, int(frame_bytes // max(1, 12 * nv))))
+    step = max(1, min(4 * pair_budget // per, int(frame_bytes // max(1, 12 * nv))))
     for lo in range(0, count, step):
         ch = np.arange(lo, min(count, lo + step))
         va, vb = frames(ch)
         for s, sv, tv in ((sides[0], va, vb), (sides[1], vb, va)):
-            m = len(s.tri)
-            s.evaluate(sv, tv, ch, np.repeat(np.arange(len(ch)), m), np.tile(np.arange(m), len(ch)), shared, dense=True)
+            s.evaluate_all(sv, tv, ch, shared)
         if shared.exceeded:
             return done()
     # refinement rounds: the pending pairs split, on the poses where they are above
@@ -775,7 +872,7 @@ def deviation_bound(frames, count: int, tri_a, tri_b, refine: float, resolution:
                 i0, i1 = np.searchsorted(gf, ch[0]), np.searchsorted(gf, ch[-1], side="right")
                 for i in range(i0, i1, pair_budget):
                     j = min(i1, i + pair_budget)
-                    s.evaluate(sv, tv, ch, np.searchsorted(ch, gf[i:j]), q[i:j], shared, dense=False)
+                    s.evaluate(sv, tv, ch, np.searchsorted(ch, gf[i:j]), q[i:j], shared)
             if shared.exceeded:
                 return done()
     for s in sides:  # pairs left at the last round keep their bound

@@ -98,7 +98,7 @@ PREFIX_TOLERANCE = 0.02
 FLOOR_FRACTION = 0.005
 MIN_FACES = 64
 #: Skinned poses kept in memory by the deviation when they fit in this many bytes.
-SKIN_CACHE_BYTES = 256 * 2 ** 20
+SKIN_CACHE_BYTES = 512 * 2 ** 20
 
 
 # ------------------------------------------------------------------------------ options
@@ -242,14 +242,16 @@ def deviation(full: SkinnedMesh, proxy: SkinnedMesh, poses: Poses | None = None,
     nv = full.vertex_count + proxy.vertex_count
     cache = {}
     if F * nv * 12 <= SKIN_CACHE_BYTES:  # every pose skinned once, in a few kernel calls
+        cache["a"] = np.empty((F, full.vertex_count, 3), np.float32)
+        cache["b"] = np.empty((F, proxy.vertex_count, 3), np.float32)
         for ch in _chunks(F, nv):
-            a, b = skin_points(full.positions, full.joint_indices, full.joint_weights, poses.mats[ch]), \
-                skin_points(proxy.positions, proxy.joint_indices, proxy.joint_weights, poses.mats[ch])
-            cache["a"] = a if "a" not in cache else np.concatenate([cache["a"], a])
-            cache["b"] = b if "b" not in cache else np.concatenate([cache["b"], b])
+            cache["a"][ch] = skin_points(full.positions, full.joint_indices, full.joint_weights, poses.mats[ch])
+            cache["b"][ch] = skin_points(proxy.positions, proxy.joint_indices, proxy.joint_weights, poses.mats[ch])
 
     def frames(idx):
         if cache:
+            if len(idx) and idx[-1] - idx[0] == len(idx) - 1:  # a run of poses: views, no copy
+                return cache["a"][idx[0]:idx[-1] + 1], cache["b"][idx[0]:idx[-1] + 1]
             return cache["a"][idx], cache["b"][idx]
         m = poses.mats[idx]
         return (skin_points(full.positions, full.joint_indices, full.joint_weights, m),
