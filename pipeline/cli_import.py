@@ -58,11 +58,14 @@ def format_summary(result) -> str:
     if parts:
         lines.append("")
         faces = result.mesh.parts.face_offsets
-        lines.append(f"  {'part':>4} {'joint':<20} {'faces':>6} {'vertices':>8} {'radius':>10} {'slack':>7}")
+        lines.append(f"  {'part':>4} {'joint':<20} {'faces':>6} {'vertices':>8} {'radius':>10} {'slack':>7} {'growth':>9}")
         for i, p in enumerate(parts):
+            g = p.get("growth", 0.0)
             lines.append(f"  {i:>4} {str(p.get('joint'))[:20]:<20} {int(faces[i + 1] - faces[i]):>6} "
-                         f"{p.get('vertices', 0):>8} {p.get('radius', 0):>10.4g} {p.get('slack_ratio', float('nan')):>7.3f}")
-        lines.append("  (radius in joint space; slack = radius / tightest per-frame sphere)")
+                         f"{p.get('vertices', 0):>8} {p.get('radius', 0):>10.4g} {p.get('slack_ratio', float('nan')):>7.3f} "
+                         f"{g / p['radius'] if p.get('radius') else 0.0:>9.2%}")
+        lines.append("  (radius in joint space; slack = radius / tightest per-frame sphere; growth = how much of "
+                     "the radius covers motion between frames beyond the frames' minimal sphere)")
     simp = next((r for r in result.reports if r.stage == "simplify"), None)
     if simp is not None:
         lines.append("")

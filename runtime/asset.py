@@ -14,6 +14,7 @@ import numpy as np
 
 from . import schema
 from .errors import ColliderError
+from .kernels.bounds import BoundData, bound_data
 
 PARTS = schema.PARTS_PREFIX
 
@@ -50,9 +51,10 @@ class ColliderData:
     face_offsets (P+1,) / faces: CSR faces of each part, vert_offsets (P+1,) / verts: CSR
     vertices of each part, face_part (F,) first part holding each face; each part's faces are
     ordered along a Morton curve and cut into chunks: chunk_offsets (C+1,) into ``faces``,
-    part_chunks (P+1,) into the chunks. pj_*: CSR per part of (joint, bind-space sphere of the
-    part's vertices that joint influences), for culling bounds without skinning; ``convex``:
-    every weight >= 0 and each vertex's weights sum to 1 (what those bounds need).
+    part_chunks (P+1,) into the chunks. ``bounds``: the per-part data of the sound bounds
+    (:class:`runtime.kernels.bounds.BoundData`), for culling and certifying spheres without
+    skinning.  Matrices are column-vector (``p' = M @ p``, :mod:`runtime.schema`), converted from
+    USD's row-vector layout once, here.
     """
 
     path: str
@@ -83,19 +85,15 @@ class ColliderData:
     face_part: np.ndarray
     chunk_offsets: np.ndarray
     part_chunks: np.ndarray
-    pj_offsets: np.ndarray
-    pj_joint: np.ndarray
-    pj_center: np.ndarray
-    pj_radius: np.ndarray
-    convex: bool
+    bounds: BoundData
     clips: list = field(default_factory=list)
     static_local_to_world: np.ndarray | None = None
     stage: object = None  # kept open only when the skeleton's transform is animated
 
 
 def _mats(value, what):
-    a = np.asarray(value, dtype=np.float64) if value is not None else None
-    if a is None or a.ndim != 3 or a.shape[1:] != (4, 4):
+    a = schema.matrices_from_usd(value)
+    if a is None or a.ndim != 3:
         raise ColliderError(f"{what} is missing or not an array of 4x4 matrices")
     return a
 
@@ -158,7 +156,8 @@ def _samples(attr, count, width, what):
     return np.asarray(times, dtype=np.float64), np.ascontiguousarray(arr)
 
 
-def _read_clip(prim, joint_index):
+def read_clip(prim, joint_index) -> ClipData:
+    """One ``SkelAnimation`` prim as :class:`ClipData` (raises :class:`ColliderError`)."""
     from pxr import UsdSkel
 
     anim = UsdSkel.Animation(prim)
@@ -217,34 +216,19 @@ def _chunk_parts(points, triangles, face_offsets, faces, size=CHUNK_FACES):
     return out, np.array(chunk_offsets, dtype=np.int64), np.array(part_chunks, dtype=np.int64)
 
 
-def _part_joint_spheres(points, ji, jw, geom_bind, inv_bind, vert_offsets, verts):
-    """For each part and each joint influencing one of its vertices: the bounding sphere (box
-    centre, farthest point, padded for float32 weights) of those vertices in the joint's bind
-    space (``p @ geom_bind @ inv_bind[j]``). CSR: offsets (P+1,), joint (M,), centre (M, 3),
-    radius (M,)."""
-    P = len(vert_offsets) - 1
-    part_of = np.repeat(np.arange(P), np.diff(vert_offsets))
-    k = ji.shape[1]
-    pv = np.repeat(np.arange(len(verts)), k)  # index into verts
-    jj = ji[verts].ravel().astype(np.int64)
-    ww = jw[verts].ravel()
-    keep = ww != 0
-    pv, jj = pv[keep], jj[keep]
-    key = part_of[pv] * len(inv_bind) + jj
-    order = np.argsort(key, kind="stable")
-    pv, jj, key = pv[order], jj[order], key[order]
-    hom = np.c_[points[verts[pv]].astype(np.float64), np.ones(len(pv))] @ geom_bind
-    y = np.einsum("ni,nij->nj", hom, inv_bind[jj])[:, :3]
-    uk, start = np.unique(key, return_index=True)
-    lo = np.minimum.reduceat(y, start, axis=0)
-    hi = np.maximum.reduceat(y, start, axis=0)
-    centre = (lo + hi) / 2
-    grp = np.repeat(np.arange(len(uk)), np.diff(np.r_[start, len(key)]))
-    rad = np.zeros(len(uk))
-    np.maximum.at(rad, grp, np.linalg.norm(y - centre[grp], axis=1))
-    rad = rad * (1 + 1e-5) + 1e-6 * (1 + np.linalg.norm(centre, axis=1))
-    offsets = np.searchsorted(uk // len(inv_bind), np.arange(P + 1)).astype(np.int64)
-    return offsets, (uk % len(inv_bind)).astype(np.int64), np.ascontiguousarray(centre), rad
+def blend_shapes(mesh) -> str:
+    """What blend shapes a mesh prim binds (``skel:blendShapes`` / ``skel:blendShapeTargets``),
+    as a short description, or "" when it has none."""
+    from pxr import UsdSkel
+
+    b = UsdSkel.BindingAPI(mesh)
+    names = b.GetBlendShapesAttr().Get() if b.GetBlendShapesAttr() else None
+    targets = b.GetBlendShapeTargetsRel().GetTargets() if b.GetBlendShapeTargetsRel() else []
+    if names:
+        return f"skel:blendShapes = {list(names)[:3]}{'...' if len(names) > 3 else ''}"
+    if targets:
+        return f"skel:blendShapeTargets -> {str(targets[0])}"
+    return ""
 
 
 def _static_local_to_world(prim):
@@ -256,8 +240,7 @@ def _static_local_to_world(prim):
         if x and x.TransformMightBeTimeVarying():
             return None
         p = p.GetParent()
-    return np.asarray(UsdGeom.Imageable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default()),
-                      dtype=np.float64)
+    return schema.matrices_from_usd(UsdGeom.Imageable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default()))
 
 
 def read_collider(path) -> ColliderData:
@@ -364,7 +347,11 @@ def _read(path) -> ColliderData:
         raise ColliderError(f"{mesh.GetPath()}: joint index out of range 0..{J - 1}")
     gb_attr = binding.GetGeomBindTransformAttr()
     gb = gb_attr.Get() if gb_attr and gb_attr.HasAuthoredValue() else None
-    geom_bind = np.asarray(gb, dtype=np.float64) if gb is not None else np.eye(4)
+    geom_bind = schema.matrices_from_usd(gb) if gb is not None else np.eye(4)
+    blend = blend_shapes(mesh)
+    if blend:
+        raise ColliderError(f"{mesh.GetPath()} has UsdSkel blend shapes ({blend}); colossus skins without them, so "
+                            f"its shape would differ from UsdSkel's: not supported")
 
     # -- parts
     where = f"{mesh.GetPath()}.{PARTS}"
@@ -394,10 +381,9 @@ def _read(path) -> ColliderData:
         raise ColliderError(f"{where}faces: {int((face_part < 0).sum())} faces are in no part")
     vert_offsets, verts = schema.part_vertex_csr(tris, offs, faces, V)
     faces, chunk_offsets, part_chunks = _chunk_parts(pts.astype(np.float64), tris, offs, faces)
-    pj = _part_joint_spheres(pts, ji, jw, geom_bind, inv_bind, vert_offsets, verts)
-    convex = bool((jw >= 0).all() and np.allclose(jw.sum(1, dtype=np.float64), 1.0, rtol=0, atol=1e-6))
+    bounds = bound_data(pts, ji, jw, geom_bind, bind, part_joint, centers, radii, vert_offsets, verts)
 
-    clips = [_read_clip(a, joint_index) for a in anims]
+    clips = [read_clip(a, joint_index) for a in anims]
     names = [c.name for c in clips]
     if len(set(names)) != len(names):
         raise ColliderError("duplicate clip names")
@@ -416,6 +402,6 @@ def _read(path) -> ColliderData:
         part_joint=part_joint, part_centers=np.ascontiguousarray(centers), part_radii=radii,
         face_offsets=offs, faces=faces, vert_offsets=vert_offsets, verts=verts,
         face_part=face_part, chunk_offsets=chunk_offsets, part_chunks=part_chunks,
-        pj_offsets=pj[0], pj_joint=pj[1], pj_center=pj[2], pj_radius=pj[3], convex=convex, clips=clips, static_local_to_world=l2w,
+        bounds=bounds, clips=clips, static_local_to_world=l2w,
         stage=stage if l2w is None else None,
     )

@@ -22,6 +22,12 @@ Rows (median of repeats; absolute times are THIS machine's):
    Row 4 repeats row 2 with 16 rays crossing the whole model (worst case for lazy skinning).
 3. ``sphere``: one sphere contact query (all contacts) vs ``trimesh.proximity.closest_point``
    (one closest point; mesh and its r-tree built once, not timed).
+5. ``controller``: one :class:`runtime.controller.CharacterController` step at 60 steps per
+   second on the wave (a player of radius 3.5% of the model size standing still on the top of
+   the tube, then walking to and fro along it, half a second each way), printed beside the pose update of the same frame
+   (``col.pose(...).points``, as row 1), which is timed apart: the step includes everything it
+   asks of the collider (its contact queries, the parts' culling data they prepare on a fresh
+   pose, tracking its contacts).
 """
 
 from __future__ import annotations
@@ -140,13 +146,13 @@ def make_bench_asset(path):
     pose = None
     for clip, t, skel_x in poses:
         if clip is None:
-            pts_t, sk = pts, bind
+            pts_t, sk = pts, schema.row_vector(bind)  # (written above in USD's row-vector layout)
         else:
             pose = col.pose(clip, t, out=pose)
             pts_t, sk = pose.points.astype(np.float64), pose.skel_transforms
         for p in range(JOINTS):
             v = d.verts[d.vert_offsets[p]:d.vert_offsets[p + 1]]
-            h = np.c_[pts_t[v], np.ones(len(v))] @ np.linalg.inv(sk[p])
+            h = np.c_[pts_t[v], np.ones(len(v))] @ np.linalg.inv(sk[p]).T  # column-vector skel transforms
             local[p].append(h[:, :3])
     centers, rads = np.zeros((JOINTS, 3)), np.zeros(JOINTS)
     for p in range(JOINTS):
@@ -167,6 +173,41 @@ def _median_time(fn, repeat, warm=3):
         fn()
         ts.append(time.perf_counter() - t0)
     return float(np.median(ts))
+
+
+def game_frame_queries(pose, size, rng):
+    """The queries of one game frame around a player standing on the model's highest point of
+    ``pose``: ``(player (3,), radius, origins (16, 3), directions (16, 3))``: a player sphere of
+    radius 3.5% of the model size, 8 ground probes in a downward fan (2 radii long) and 8 camera
+    rays from 6 radii behind and above the player towards its surroundings."""
+    r = 0.035 * size
+    player = pose.points[int(np.argmax(pose.points[:, 1]))].astype(np.float64) + [0, 0.5 * r, 0]
+    ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    fan = np.c_[0.4 * np.cos(ang), -np.ones(8), 0.4 * np.sin(ang)]
+    cam = player + [-6 * r, 3 * r, 0.5 * r]
+    look = player + rng.normal(scale=r, size=(8, 3))
+    o = np.r_[np.repeat(player[None], 8, 0), np.repeat(cam[None], 8, 0)]
+    dirs = np.r_[fan, look - cam]
+    return player, r, o, dirs
+
+
+def game_frame(col, clip, seed=0):
+    """A callable running one game frame on ``col`` as row 2 of :func:`run_bench` measures it:
+    the pose at a new time of ``clip``, one player sphere contact query and 16 rays
+    (:func:`game_frame_queries`)."""
+    rng = np.random.default_rng(seed)
+    times = col.frame_times(clip)
+    ts = iter(rng.uniform(times[0], times[-1], 10 ** 6))
+    pose = col.pose(clip, float(times[len(times) // 2]))
+    player, r, o, dirs = game_frame_queries(pose, col.size(), rng)
+
+    def frame():
+        p = col.pose(clip, next(ts), out=pose)
+        p.sphere_contacts(player, r)
+        p.raycast(o[:8], dirs[:8], 2 * r)
+        p.raycast(o[8:], dirs[8:])
+
+    return frame
 
 
 def run_bench(path=None, repeat=50):
@@ -209,17 +250,8 @@ def run_bench(path=None, repeat=50):
 
     # -- 2: a game frame
     size = col.size()
-    r = 0.035 * size
     pose = col.pose("wave", 10.0, out=pose)
-    player = pose.points[int(np.argmax(pose.points[:, 1]))].astype(np.float64) + [0, 0.5 * r, 0]
-    # 16 rays a game casts around the player: 8 ground probes in a downward fan (2 radii long)
-    # and 8 camera rays from 6 radii behind and above the player towards its surroundings
-    ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
-    fan = np.c_[0.4 * np.cos(ang), -np.ones(8), 0.4 * np.sin(ang)]
-    cam = player + [-6 * r, 3 * r, 0.5 * r]
-    look = player + rng.normal(scale=r, size=(8, 3))
-    o = np.r_[np.repeat(player[None], 8, 0), np.repeat(cam[None], 8, 0)]
-    dirs = np.r_[fan, look - cam]
+    player, r, o, dirs = game_frame_queries(pose, size, rng)
     # the same number of rays crossing the whole model (worst case, reported as row 4)
     o_wide = player[None] + rng.normal(scale=0.2 * size, size=(16, 3)) + [0, size * 0.3, 0]
     d_wide = pose.points[rng.integers(0, len(pose.points), 16)] - o_wide
@@ -253,6 +285,26 @@ def run_bench(path=None, repeat=50):
     it2 = iter(range(10 ** 9))
     base3 = _median_time(lambda: trimesh.proximity.closest_point(m, centers[next(it2) % 64][None]),
                          max(10, repeat // 2), warm=2)
+    # -- 5: any pose (IK / ragdoll): pose_from_joints with random joint rotations up to 180 degrees
+    from .kernels import bounds as B
+    from .kernels.pose import trs_matrices
+
+    rest = d.rest_local
+    rot = rng.normal(size=(64, len(d.joints), 3))
+    rot *= (rng.uniform(0, np.pi, size=(64, len(d.joints), 1)) / np.linalg.norm(rot, axis=2, keepdims=True))
+    quats = []
+    for k in range(64):  # axis-angle -> (x, y, z, w), numpy only
+        ang = np.linalg.norm(rot[k], axis=1, keepdims=True)
+        quats.append(np.c_[rot[k] / np.maximum(ang, 1e-30) * np.sin(ang / 2), np.cos(ang / 2)])
+    it5 = iter(range(10 ** 9))
+    locals_ = [trs_matrices(rest[:, :3, 3], q, np.ones((len(q), 3))) for q in quats]
+    fj = col.pose_from_joints(locals_[0])
+    ours5 = _median_time(lambda: col.pose_from_joints(locals_[next(it5) % 64], out=fj), repeat)
+    cert5 = _median_time(lambda: (B._pose_bounds_serial(fj._world1, *d.bounds.args(), fj._sph, fj._kb, fj._db),
+                                  B._cull_spheres(fj._sph, fj._kb, fj._db, fj.spheres, fj.cull)), repeat * 4)
+    skin5 = _median_time(lambda: (fj.__setattr__("_full", -1), fj._skin_all()), repeat)
+    refit = np.mean([col.pose_from_joints(L).refit.mean() for L in locals_[:16]])
+    ctrl_rows = bench_controller(col, steps=max(60, 5 * repeat))
     if tmp is not None:
         tmp.cleanup()
 
@@ -270,42 +322,66 @@ def run_bench(path=None, repeat=50):
         dict(name="game frame, 16 rays across the whole model instead", ours_s=ours4, baseline_s=base2,
              speedup=base2 / ours4, goal="(worst case, no goal)", met=True,
              note="rays reach most parts: most of the skin gets skinned lazily"),
-    ]
+        dict(name=f"pose_from_joints spheres certified ({col.parts} parts, tests K + D) vs skinning the pose",
+             ours_s=cert5, baseline_s=skin5, speedup=skin5 / cert5, goal="< 20 us", met=cert5 < 20e-6,
+             note=f"whole pose_from_joints {ours5 * 1e6:.1f} us (validation, joints, bounds, refits); random "
+                  f"rotations up to 180 degrees: {refit:.0%} of the spheres refit"),
+    ] + ctrl_rows
+
+
+def bench_controller(col, steps=250, rate=60.0):
+    """Rows for the controller step (module docstring, row 5): standing still, then walking."""
+    from .controller import STANDING, CharacterController, Intent
+
+    r = 0.035 * col.size()
+    tc = col.data.time_codes_per_second
+    up = col.up
+    rows = []
+    there, back = Intent(move=(1.0, 0.0, 0.0)), Intent(move=(-1.0, 0.0, 0.0))
+    for what, intents in (("standing still", lambda k: None),
+                          ("walking", lambda k: there if (k // 30) % 2 == 0 else back)):  # to and fro
+        t = 4.0
+        a, b = col.pose("wave", t), col.pose("wave", t)
+        pts = a.points.astype(np.float64)
+        tail = np.where(pts[:, 0] < 0.25 * LENGTH, pts @ up, -np.inf)  # near one end: room to walk
+        ctrl = CharacterController(col, r, position=pts[int(np.argmax(tail))] + up * r)
+        for _ in range(5):
+            ctrl.step(a, a, 1 / rate)
+        step_s, pose_s, queries, standing = [], [], 0, 0
+        for k in range(steps):
+            t = 4.0 + ((k + 1) * tc / rate) % (FRAMES - 9)  # 60 Hz through the clip, wrapping
+            t0 = time.perf_counter()
+            b = col.pose("wave", t, out=b)
+            b.points  # the full skin, as row 1 times it
+            t1 = time.perf_counter()
+            s = ctrl.step(a, b, 1 / rate, intents(k))
+            t2 = time.perf_counter()
+            a, b = b, a
+            pose_s.append(t1 - t0)
+            step_s.append(t2 - t1)
+            queries += s.queries
+            standing += s.state == STANDING
+        ours, pose = float(np.median(step_s)), float(np.median(pose_s))
+        rows.append(dict(name=f"controller step, {what} (pose update excluded)", ours_s=ours,
+                         baseline_s=pose, speedup=pose / ours, beside="pose update", goal="< 0.1 ms",
+                         met=ours < 1e-4,
+                         note=f"{steps} steps at {rate:g}/s, {queries / steps:.2f} contact queries per step, "
+                              f"standing {standing / steps:.0%} of them; fastest step {min(step_s) * 1e6:.0f} us"))
+    return rows
 
 
 def format_rows(rows) -> str:
     lines = ["runtime benchmarks (absolute times are this machine's)"]
     for r in rows:
+        goal = f"(goal {r['goal']}: {'met' if r['met'] else 'NOT met'})"
+        if r.get("beside"):  # a time shown next to another, not a race against a baseline
+            lines.append(f"  {r['name']}: {r['ours_s'] * 1e6:.1f} us, beside the {r['beside']} "
+                         f"{r['baseline_s'] * 1e6:.1f} us {goal} - {r['note']}")
+            continue
         lines.append(f"  {r['name']}: ours {r['ours_s'] * 1e3:.3f} ms, baseline {r['baseline_s'] * 1e3:.3f} ms, "
-                     f"{r['speedup']:.1f}x (goal {r['goal']}: {'met' if r['met'] else 'NOT met'}) - {r['note']}")
+                     f"{r['speedup']:.1f}x {goal} - {r['note']}")
     return "\n".join(lines)
 
 
 if __name__ == "__main__":  # pragma: no cover
     print(format_rows(run_bench()))
-
-
-def game_frame(col, clip, seed=0):
-    """A callable running one game frame on ``col`` as row 2 above measures it: the pose at a new
-    time of ``clip``, one player sphere contact query (radius 3.5% of the model size) and 16 rays
-    around the player (8 ground probes 2 radii long, 8 camera rays)."""
-    rng = np.random.default_rng(seed)
-    times = col.frame_times(clip)
-    ts = iter(rng.uniform(times[0], times[-1], 10 ** 6))
-    pose = col.pose(clip, float(times[len(times) // 2]))
-    r = 0.035 * col.size()
-    player = pose.points[int(np.argmax(pose.points[:, 1]))].astype(np.float64) + [0, 0.5 * r, 0]
-    ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
-    fan = np.c_[0.4 * np.cos(ang), -np.ones(8), 0.4 * np.sin(ang)]
-    cam = player + [-6 * r, 3 * r, 0.5 * r]
-    look = player + rng.normal(scale=r, size=(8, 3))
-    o = np.r_[np.repeat(player[None], 8, 0), np.repeat(cam[None], 8, 0)]
-    dirs = np.r_[fan, look - cam]
-
-    def frame():
-        p = col.pose(clip, next(ts), out=pose)
-        p.sphere_contacts(player, r)
-        p.raycast(o[:8], dirs[:8], 2 * r)
-        p.raycast(o[8:], dirs[8:])
-
-    return frame

@@ -1,5 +1,7 @@
-"""``colossus play ASSET [--clip NAME] -o run.gif``: a player sphere dropped on the animated
-collider, simulated (runtime.player) and rendered offscreen with pyvista."""
+"""``colossus play ASSET [--clip NAME] [--script FILE.json] -o run.gif``: a player sphere on the
+animated collider, driven by the character controller (runtime.controller) through a script of
+intents (runtime.script; the default drops it on the model and waits), rendered offscreen with
+pyvista and recorded step by step in a CSV."""
 
 from __future__ import annotations
 
@@ -12,6 +14,9 @@ from pipeline.cli import maps_errors
 
 #: Largest number of GIF frames; longer clips are subsampled.
 MAX_FRAMES = 60
+#: The player's colour in the GIF, by controller state.
+STATE_COLOURS = {"standing": "#3a9e4f", "sliding": "#e08a1e", "holding": "#2f6fd0",
+                 "hanging": "#8e3fc0", "falling": "#d0312d"}
 
 
 def render_gif(col, run, path, size=(480, 360), max_frames=MAX_FRAMES):
@@ -39,7 +44,7 @@ def render_gif(col, run, path, size=(480, 360), max_frames=MAX_FRAMES):
         pl = pv.Plotter(off_screen=True, window_size=list(size))
     pl.set_background("white")
     pl.add_mesh(mesh, color="#c9b79c", smooth_shading=False, show_edges=False)
-    pl.add_mesh(ball, color="#3a9e4f")
+    ball_actor = pl.add_mesh(ball, color=STATE_COLOURS["standing"])
     # frame the whole run: union of every shown pose and the player's path
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for i in idx:
@@ -50,6 +55,10 @@ def render_gif(col, run, path, size=(480, 360), max_frames=MAX_FRAMES):
     hi = np.maximum(hi, run.positions.max(0) + run.radius)
     centre, extent = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
     up = col.up
+    if getattr(run, "floor", None) is not None:  # the script's terrain plane
+        at = centre + (run.floor - centre @ up) * up
+        pl.add_mesh(pv.Plane(center=tuple(at), direction=tuple(up), i_size=extent, j_size=extent),
+                    color="#9aa38f", opacity=0.5)
     side = np.array([1.0, 0.0, 0.0]) if up[0] == 0 else np.array([0.0, 1.0, 0.0])
     eye = centre + extent * (0.9 * side + 0.5 * up + 0.9 * np.cross(up, side))
     pl.camera_position = [tuple(eye), tuple(centre), tuple(up)]
@@ -60,8 +69,14 @@ def render_gif(col, run, path, size=(480, 360), max_frames=MAX_FRAMES):
         pose = col.pose(run.clip, run.times[i], out=pose)
         mesh.points = pose.points.astype(np.float64)
         ball.points = ball_pts + run.positions[i]
-        text = f"{run.clip}  t={run.times[i]:g}" + ("  standing" if run.grounded[i] else "")
-        if hasattr(label, "SetInput"):
+        state = str(run.states[i])
+        ball_actor.prop.color = STATE_COLOURS.get(state, "#3a9e4f")
+        text = f"{run.clip}  t={run.times[i]:.4g}  {state}"
+        if state in ("holding", "hanging"):
+            text += f"  energy {run.energy[i]:.0%}"
+        if hasattr(label, "set_text"):  # a CornerAnnotation (pyvista >= 0.43)
+            label.set_text("upper_left", text)
+        elif hasattr(label, "SetInput"):
             label.SetInput(text)
         pl.write_frame()
     pl.close()
@@ -78,9 +93,14 @@ def render_gif(col, run, path, size=(480, 360), max_frames=MAX_FRAMES):
               help="Simulation steps per clip frame.")
 @click.option("--verify/--no-verify", default=False, show_default=True,
               help="Run the validators' error rules on the asset first.")
+@click.option("--script", "script_path", default=None, type=click.Path(dir_okay=False),
+              help="JSON script of intents (walk, jump, grab, wait); see the README. Default: drop and wait.")
+@click.option("--csv", "csv_path", default=None, type=click.Path(dir_okay=False),
+              help="Per-step CSV to write (default: the GIF's name with .csv).")
 @maps_errors(input_status=2)
-def play_cmd(asset, clip, output, radius, substeps, verify):
-    """Drop a player sphere on ASSET's animated collider and record it as a GIF.
+def play_cmd(asset, clip, output, radius, substeps, verify, script_path, csv_path):
+    """Drop a player sphere on ASSET's animated collider, play a script of intents, and record
+    it as a GIF (the player coloured by state) and a per-step CSV.
 
     Prints the largest penetration and the largest slip relative to the surface."""
     from validators import require_passing
@@ -88,28 +108,37 @@ def play_cmd(asset, clip, output, radius, substeps, verify):
     from .collider import load_collider
     from .errors import ColliderError
     from .player import simulate
+    from .script import load_script, run_script, write_csv
 
+    script = load_script(script_path) if script_path is not None else None  # a bad script: exit 2
     col = load_collider(asset, verify=require_passing if verify else None)
     if not col.clips:
         raise ColliderError(f"{asset}: has no animation clips")
-    clip = clip or col.clips[0]
-    if clip not in col.clips:
+    if script is None:
+        clip = clip or col.clips[0]
+    if clip is not None and clip not in col.clips:  # a script's own clip is checked with the script
         raise click.UsageError(f"no clip {clip!r} in {asset}; clips: {', '.join(col.clips)}")
     if not str(output).lower().endswith(".gif"):
         raise click.UsageError("-o must name a .gif file")
+    csv_path = csv_path or os.path.splitext(output)[0] + ".csv"
     try:
-        run = simulate(col, clip, radius_fraction=radius, substeps=substeps)
+        if script is None:
+            run = simulate(col, clip, radius_fraction=radius, substeps=substeps)
+        else:
+            run = run_script(col, script, clip, radius_fraction=radius)
     except ValueError as e:
         raise click.ClickException(str(e)) from None
     try:
         n = render_gif(col, run, output)
+        rows = write_csv(run, csv_path)
     except OSError as e:
-        raise click.ClickException(f"cannot write {output}: {e}") from None
+        raise click.ClickException(f"cannot write {e.filename or output}: {e.strerror or e}") from None
     r = run.radius
     landed = f"landed at t={run.landed_at:g}" if run.landed_at is not None else "never landed"
-    click.echo(f"play {os.path.basename(asset)} clip {clip!r}: {len(run.times)} frames, radius {r:.4g}, "
-               f"{landed}, standing {int(run.grounded.sum())}/{len(run.times)} frames")
+    states = ", ".join(f"{k} {v}" for k, v in run.state_counts().items())
+    click.echo(f"play {os.path.basename(asset)} clip {run.clip!r}: {len(run.times)} steps at {run.rate:g}/s, "
+               f"radius {r:.4g}, {landed}; {states}")
     click.echo(f"largest penetration {run.max_penetration:.4g} ({run.max_penetration / r:.1%} of radius)")
-    click.echo(f"largest slip relative to the surface {run.max_slip:.4g} per frame "
+    click.echo(f"largest slip relative to the surface {run.max_slip:.4g} per step "
                f"({run.max_slip / r:.1%} of radius)")
-    click.echo(f"wrote {output} ({n} frames)")
+    click.echo(f"wrote {output} ({n} frames), {csv_path} ({rows} rows)")

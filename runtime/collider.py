@@ -7,7 +7,11 @@
 >>> carried = cs.anchors().at(col.pose("walk", 13.0))   # momentum inheritance (thesis 5.5.3)
 
 Shapes follow the contract: points (V, 3) float32 stage space, spheres (P, 4) float64.
-Queries work in float64 on the float32 posed points.
+Queries work in float64 on the float32 posed points.  Matrices are column-vector float64
+(``p' = M @ p``; :mod:`runtime.schema` is the one conversion from USD's row-vector layout).
+
+>>> pose = col.pose_from_joints(local)     # any pose: (J, 4, 4) joint-local, skeleton order
+>>> pose.refit                             # (P,) bool: spheres grown because the stored one did not hold
 """
 
 from __future__ import annotations
@@ -18,12 +22,19 @@ import numpy as np
 
 from . import kernels as K
 from .asset import ClipData, ColliderData, read_collider
+from .kernels import bounds as B
+from .kernels import pose as PK
+from .kernels import skin as SK
 from .errors import ColliderError
 
 #: Above this many rays the parallel ray kernel is used.
 PARALLEL_RAYS = 256
 #: Above this many vertices skinning runs on every core.
 PARALLEL_SKIN = 8_000
+#: :meth:`Collider.pose_from_joints` grows a sphere that does not provably hold to the bound's
+#: radius when that is at most this many times the stored radius, else to the farthest skinned
+#: vertex of the part (exact, O(part vertices)).
+REFIT_FROM_BOUND = 1.25
 
 
 # -- results -----------------------------------------------------------------------------------
@@ -251,20 +262,27 @@ def _vec3s(a, name):
 
 
 class Pose:
-    """The collider at one clip and time: skinned points, part spheres, queries.
+    """The collider at one pose: skinned points, part spheres, queries.
 
-    Posing is lazy when the skin weights allow (``collider.lazy`` and convex weights): :meth:`set`
-    computes the joints, the part spheres and provable culling spheres; a query skins only the
-    parts it reaches, and reading :attr:`points` skins the rest (same numbers either way).
+    Made by :meth:`Collider.pose` (a clip at a time) or :meth:`Collider.pose_from_joints` (any
+    joint-local pose).  Posing is lazy: :meth:`set` computes the joints, the part spheres and
+    provable culling spheres (tests K and D of :mod:`runtime.kernels.bounds`, no vertex
+    skinned); a query skins only the parts it reaches, and reading :attr:`points` skins the rest
+    (same numbers either way).
 
     Attributes
     ----------
     points : (V, 3) float32, stage space (preallocated, updated in place)
-    spheres : (P, 4) float64, part sphere centres + radii moved with their joints
+    spheres : (P, 4) float64, part sphere centres + radii: the stored spheres moved with their
+        joints; for :meth:`Collider.pose_from_joints`, grown where they do not provably hold
+    refit : (P,) bool, the parts whose sphere was grown for this pose (always False for a clip
+        pose: the validator certifies those spheres for every time of every clip)
     cull : (P, 4) float64, the spheres used for culling: same centres, radius provably reaching
-        every posed vertex of the part (bounds from the joints' bind-space spheres, or the
-        farthest skinned vertex), so culling never changes an answer
-    skel_transforms : (J, 4, 4) float64, joint skeleton-space transforms
+        every posed vertex of the part, so culling never changes an answer
+    skel_transforms : (J, 4, 4) float64, joint skeleton-space transforms (column-vector)
+    skinning_transforms : (J, 4, 4), ``skel @ inv_bind @ geom_bind``
+    joint_world : (J, 4, 4), joint -> stage space (``local_to_world @ skel``)
+    local_to_world : (4, 4), the skeleton prim's local-to-world transform
     clip, time, seconds
     """
 
@@ -274,18 +292,24 @@ class Pose:
         self._data = d
         V, J, P = len(d.rest_points), len(d.joints), len(d.part_joint)
         self._points = np.empty((V, 3), dtype=np.float32)
+        self._points1 = self._points.reshape(1, V, 3)  # the skinning kernel's (F, V, 3) view
         self._full = -1  # version at which every vertex was skinned
         self.spheres = np.empty((P, 4))
         self.cull = np.empty((P, 4))
+        self.refit = np.zeros(P, dtype=bool)
         self.skel_transforms = np.empty((J, 4, 4))
         self.skinning_transforms = np.empty((J, 4, 4))
-        self._skin_world = np.empty((J, 12))  # skinning_transforms @ local_to_world, flattened (kernels._fold)
+        self._skin_world = np.empty((1, J, 12))  # local_to_world @ skinning_transforms (kernels.skin.fold)
         self.joint_world = np.empty((J, 4, 4))
+        self._world1 = self.joint_world.reshape(1, J, 4, 4)
         self.local_to_world = np.eye(4)
         self.chunk_spheres = np.empty((len(d.chunk_offsets) - 1, 4))
         self._ready = np.zeros(P, dtype=np.int64)  # part p's chunk spheres are valid if == _version
         self._version = 0
         self._local = np.empty((J, 4, 4))
+        self._sph = np.empty((1, P, 4))
+        self._kb = np.empty((1, P))
+        self._db = np.empty((1, P))
         self._buffers = None
         self._stamp = 0
         self.clip = None
@@ -302,30 +326,72 @@ class Pose:
         time = float(time)
         if not np.isfinite(time):
             raise ValueError(f"time must be finite, got {time}")
+        self._set_world(time)
+        PK._locals_at(time, c.tt, c.vt, c.tr, c.vr, c.ts, c.vs, c.anim_to_skel, d.rest_local, self._local)
+        self._posed()
+        self.refit[:] = False
+        self.clip = c.name if clip is not None else None
+        self.time = time
+        return self
+
+    def set_joints(self, local, time: float = 0.0) -> "Pose":
+        """Re-pose in place at joint-local transforms ``local`` (J, 4, 4) column-vector, skeleton
+        joint order (validated by :meth:`Collider.pose_from_joints`); grow the spheres that do
+        not provably hold (see :attr:`refit`)."""
+        self._set_world(float(time))
+        self._local[:] = local
+        self._posed()
+        self._refit()
+        self.clip = None
+        self.time = float(time)
+        return self
+
+    def _set_world(self, time):
+        d = self._data
         if d.static_local_to_world is not None:
             self.local_to_world = d.static_local_to_world
         else:
             from pxr import UsdGeom
 
+            from . import schema
+
             prim = d.stage.GetPrimAtPath(d.skeleton_path)
-            self.local_to_world = np.asarray(UsdGeom.Imageable(prim).ComputeLocalToWorldTransform(time))
-        K._joint_transforms(time, c.tt, c.vt, c.tr, c.vr, c.ts, c.vs, c.anim_to_skel, d.rest_local,
-                            d.parents, d.topo_order, d.inv_bind, d.geom_bind, self.local_to_world,
-                            self._local, self.skel_transforms, self.skinning_transforms, self.joint_world)
-        K._fold(self.skinning_transforms, self.local_to_world, self._skin_world)
+            self.local_to_world = schema.matrices_from_usd(UsdGeom.Imageable(prim).ComputeLocalToWorldTransform(time))
+
+    def _posed(self):
+        d = self._data
+        PK._compose(self._local, d.parents, d.topo_order, d.inv_bind, d.geom_bind, self.local_to_world,
+                    self.skel_transforms, self.skinning_transforms, self.joint_world, self._skin_world)
         self._version += 1
-        if d.convex and self.collider.lazy:
-            K._part_spheres(d.part_centers, d.part_radii, d.part_joint, self.joint_world,
-                            self._points, d.vert_offsets, d.verts, self.spheres, self.cull, False)
-            K._cull_bounds(self.spheres, d.pj_offsets, d.pj_joint, d.pj_center, d.pj_radius,
-                           self.joint_world, self.cull)
-        else:
+        B._pose_bounds_serial(self._world1, *d.bounds.args(), self._sph, self._kb, self._db)
+        B._cull_spheres(self._sph, self._kb, self._db, self.spheres, self.cull)
+        if not self.collider.lazy:
             self._skin_all()
-            K._part_spheres(d.part_centers, d.part_radii, d.part_joint, self.joint_world,
-                            self._points, d.vert_offsets, d.verts, self.spheres, self.cull, True)
-        self.clip = c.name if clip is not None else None
-        self.time = time
-        return self
+            d_, _ = SK.part_farthest(d.rest_points, d.joint_indices, d.joint_weights, self._skin_world,
+                                     d.vert_offsets, d.verts, self.spheres[None, :, :3])
+            far = d_[0] * (1.0 + 1e-6) + 1e-9
+            self.cull[:, 3] = np.maximum(self.spheres[:, 3], far)
+
+    def _refit(self):
+        """Parts whose stored sphere the bounds cannot prove: the bound's sphere when it is at
+        most :data:`REFIT_FROM_BOUND` times larger, else the farthest skinned vertex."""
+        s = self.spheres
+        bound = np.minimum(self._kb[0], self._db[0])
+        grow = ~(bound <= s[:, 3])
+        self.refit[:] = grow
+        if not grow.any():
+            return
+        loose = grow & ~(bound <= REFIT_FROM_BOUND * s[:, 3])
+        s[grow, 3] = bound[grow]
+        if loose.any():
+            d = self._data
+            far, _ = SK.part_farthest(d.rest_points, d.joint_indices, d.joint_weights, self._skin_world,
+                                      d.vert_offsets, d.verts, s[None, :, :3], todo=loose[None])
+            stored = self._sph[0, :, 3]
+            held = loose & (far[0] <= stored)  # the bounds were too loose: the stored sphere does hold
+            s[loose, 3] = far[0, loose] * (1.0 + 1e-9)
+            s[held, 3] = stored[held]
+            self.refit[held] = False
 
     # -- queries
 
@@ -389,8 +455,8 @@ class Pose:
     def _skin_all(self):
         if self._full != self._version:
             d = self._data
-            kern = K._skin_lbs if len(d.rest_points) > PARALLEL_SKIN else K._skin_lbs_serial
-            kern(d.rest_points, d.joint_indices, d.joint_weights, self._skin_world, self._points)
+            kern = SK._skin_frames if len(d.rest_points) > PARALLEL_SKIN else SK._skin_frames_serial
+            kern(d.rest_points, d.joint_indices, d.joint_weights, self._skin_world, self._points1)
             self._full = self._version
 
     def _lazy(self):
@@ -461,6 +527,73 @@ class Collider:
     def up(self) -> np.ndarray:
         """(3,) the stage's up vector."""
         return np.array([0.0, 0.0, 1.0]) if self.data.up_axis == "Z" else np.array([0.0, 1.0, 0.0])
+
+    @property
+    def joints(self) -> list:
+        """Skeleton joint paths, in skeleton order (the order of :meth:`pose_from_joints`)."""
+        return list(self.data.joints)
+
+    @property
+    def rest_local(self) -> np.ndarray:
+        """(J, 4, 4) column-vector joint-local rest transforms (a starting point for IK)."""
+        return self.data.rest_local.copy()
+
+    def pose_from_joints(self, local=None, *, translations=None, rotations=None, scales=None,
+                         time: float = 0.0, out: Pose | None = None) -> Pose:
+        """The collider at any pose (IK, ragdoll, procedural), with spheres that hold for it.
+
+        Parameters
+        ----------
+        local : (J, 4, 4) float64, optional
+            Joint-local transforms in skeleton joint order (:attr:`joints`), **column-vector**
+            (``p_parent = local[j] @ p_joint``, translation in the last column), affine (last row
+            ``0 0 0 1``).  Or give the TRS arrays instead:
+        translations : (J, 3), rotations : (J, 4) ``(x, y, z, w)``, scales : (J, 3), optional
+            ``local = T R S`` (UsdSkel's composition); translations default to the rest pose's,
+            scales to 1; rotations are required and normalised.
+        time : float
+            Time code for an animated skeleton transform (only then does it matter).
+        out : Pose, optional  reuse its buffers
+
+        Returns
+        -------
+        Pose
+            ``pose.spheres`` hold every skinned vertex of their part: the stored sphere where the
+            bounds prove it (tests K and D, O(parts x influencing joints)), otherwise grown
+            (``pose.refit[p]``) to the bound's radius or, when that is loose, to the part's
+            farthest skinned vertex.  Queries are exact (culling never drops a triangle).
+        """
+        J = len(self.data.joints)
+        if local is None:
+            if rotations is None:
+                raise ValueError("pose_from_joints: give local (J, 4, 4) or rotations (J, 4)")
+            t = self.data.rest_local[:, :3, 3] if translations is None else translations
+            sc = np.ones((J, 3)) if scales is None else scales
+            arrs = [np.asarray(a, dtype=np.float64) for a in (t, rotations, sc)]
+            for name, a, w in zip(("translations", "rotations", "scales"), arrs, (3, 4, 3)):
+                if a.shape != (J, w):
+                    raise ValueError(f"pose_from_joints: {name} must be ({J}, {w}), got {a.shape}")
+                if not np.isfinite(a).all():
+                    raise ValueError(f"pose_from_joints: {name} must be finite")
+            if (np.linalg.norm(arrs[1], axis=1) == 0).any():
+                raise ValueError("pose_from_joints: a rotation quaternion is zero")
+            local = PK.trs_matrices(*arrs)
+        else:
+            if translations is not None or rotations is not None or scales is not None:
+                raise ValueError("pose_from_joints: give local or translations/rotations/scales, not both")
+            local = np.asarray(local, dtype=np.float64)
+            if local.shape != (J, 4, 4):
+                raise ValueError(f"pose_from_joints: local must be ({J}, 4, 4) (one per skeleton joint), "
+                                 f"got {local.shape}")
+            if not np.isfinite(local).all():
+                raise ValueError("pose_from_joints: local transforms must be finite")
+            if not np.allclose(local[:, 3], [0, 0, 0, 1], atol=1e-9):
+                raise ValueError("pose_from_joints: local transforms must be affine column-vector matrices "
+                                 "(last row 0 0 0 1); a row-vector (USD layout) matrix must be transposed")
+        p = out if out is not None else Pose(self)
+        if p.collider is not self:
+            raise ValueError("out is a pose of another collider")
+        return p.set_joints(local, time)
 
     def frame_times(self, clip: str) -> np.ndarray:
         """(n,) float64 time codes of the clip's samples (its frames)."""

@@ -8,9 +8,9 @@
 * joint ordering: UsdSkel joint paths, parents before children (:func:`parents_first`);
 * the one matrix convention: numpy code works with **column-vector** ``float64`` 4x4 matrices
   (``p' = M @ p``, translation in the last column); USD's ``GfMatrix4d`` is row-vector (the
-  transpose).  :func:`matrices_from_usd` / :func:`matrices_to_usd` are the only conversions.
-  (The runtime's numba kernels take the row-vector layout USD hands to numpy; they get it from
-  :func:`row_vector`, i.e. from this module too.)
+  transpose).  :func:`matrices_from_usd` / :func:`matrices_to_usd` are the only conversions
+  (the runtime's arrays and kernels are column-vector too; :func:`row_vector` hands matrices to
+  usd-core functions that take raw row-vector arrays, e.g. ``UsdSkel.SkinPointsLBS``).
 * quaternions are ``(x, y, z, w)`` (scalar last), pxr's numpy order.
 """
 

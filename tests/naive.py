@@ -1,6 +1,9 @@
 """Slow, readable references for the fast kernels (stumpy-style): tests compare against these.
 
-Nothing here is clever; every function is a direct transcription of its definition.
+Nothing here is clever; every function is a direct transcription of its definition.  Nothing here
+imports or calls project code (``pipeline``, ``validators``, ``runtime``): a reference that called
+the code under test would check it against itself.  Functions take the project's data objects
+(e.g. a ``SkinnedMesh``) only to read their arrays.
 """
 
 from __future__ import annotations
@@ -8,8 +11,7 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
-
-from pipeline.model import skel_transforms
+from scipy.optimize import minimize, nnls
 
 
 # -- weld -------------------------------------------------------------------------------------
@@ -109,6 +111,38 @@ def dominant_joints(triangles, joint_indices, joint_weights):
 
 # -- skinning ---------------------------------------------------------------------------------
 
+def skel_transforms(local, parents):
+    """Skeleton-space joint transforms from joint-local ones: for each joint, the product of the
+    local transforms up its parent chain (root first), with no assumption on joint order.
+
+    local : (..., b, 4, 4) column-vector; parents : (b,) parent index or -1."""
+    local = np.asarray(local, dtype=np.float64)
+    out = np.empty_like(local)
+    for j in range(len(parents)):
+        m = local[..., j, :, :]
+        p = int(parents[j])
+        while p >= 0:
+            m = local[..., p, :, :] @ m
+            p = int(parents[p])
+        out[..., j, :, :] = m
+    return out
+
+
+def skin_points(mesh, skel):
+    """Linear-blend skinning of ``mesh`` (a ``SkinnedMesh``: positions, joint indices/weights,
+    bind transforms, geom_bind) for skeleton transforms ``skel`` (f, b, 4, 4): a python loop over
+    influences, one vertex at a time.  Returns (f, n, 3) float64 skeleton-space points."""
+    skel = np.asarray(skel, dtype=np.float64)
+    inv_bind = np.linalg.inv(mesh.bind_transforms)
+    out = np.zeros((len(skel), mesh.vertex_count, 3))
+    for v in range(mesh.vertex_count):
+        p = mesh.geom_bind @ np.append(mesh.positions[v].astype(np.float64), 1.0)
+        for j, w in zip(mesh.joint_indices[v], mesh.joint_weights[v]):
+            if w != 0:
+                out[:, v] += float(w) * (skel[:, j] @ inv_bind[j] @ p)[:, :3]
+    return out
+
+
 def skin_joint_space(mesh, joint, skel):
     """Skinned vertices of ``mesh`` in the space of ``joint`` for skeleton transforms ``skel``
     (b, 4, 4): a python loop over vertices and influences."""
@@ -125,12 +159,67 @@ def skin_joint_space(mesh, joint, skel):
     return out
 
 
+def compose(local, parents):
+    """(..., b, 4, 4) column-vector joint-local -> skeleton space, a python loop (parents first)."""
+    local = np.asarray(local, dtype=np.float64)
+    out = np.empty_like(local)
+    for j, p in enumerate(parents):
+        out[..., j, :, :] = local[..., j, :, :] if p < 0 else out[..., p, :, :] @ local[..., j, :, :]
+    return out
+
+
 def all_poses(mesh):
     """Skeleton transforms of the bind pose and of every clip frame, (F, b, 4, 4)."""
-    poses = [mesh.bind_transforms[None]]
+    poses = [np.asarray(mesh.bind_transforms, dtype=np.float64)[None]]
     for c in mesh.clips:
-        poses.append(skel_transforms(c.local, mesh.parents))
+        poses.append(compose(c.local, mesh.parents))
     return np.concatenate(poses)
+
+
+def naive_lbs(points, joint_indices, joint_weights, mats):
+    """Linear-blend skinning by its definition: ``sum_k w[v, k] * mats[f, j[v, k]] @ (p[v], 1)``
+    for every pose ``f`` of column-vector ``mats`` (F, J, 4, 4); (F, n, 3) float64.  Python loops
+    over poses and influences; a zero weight contributes nothing (whatever its joint index)."""
+    p = np.c_[np.asarray(points, dtype=np.float64), np.ones(len(points))]
+    mats = np.asarray(mats, dtype=np.float64)
+    out = np.zeros((len(mats), len(p), 3))
+    for f in range(len(mats)):
+        for k in range(joint_indices.shape[1]):
+            w = np.asarray(joint_weights[:, k], dtype=np.float64)
+            j = np.where(w != 0, joint_indices[:, k], 0)
+            out[f] += w[:, None] * np.einsum("nij,nj->ni", mats[f][j][:, :3], p)
+    return out
+
+
+def trs(t, q, s):
+    """(..., 4, 4) column-vector T R S from translations, (x, y, z, w) quaternions, scales
+    (the unit-quaternion rotation matrix written out)."""
+    q = np.asarray(q, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    x, y, z, w = np.moveaxis(q, -1, 0)
+    R = np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+                  np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+                  np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], -2)
+    m = np.zeros(q.shape[:-1] + (4, 4))
+    m[..., :3, :3] = R * np.asarray(s, dtype=np.float64)[..., None, :]
+    m[..., :3, 3] = t
+    m[..., 3, 3] = 1
+    return m
+
+
+def slerp(q0, q1, a):
+    """Shortest-arc slerp of (..., 4) quaternions by ``a`` (textbook formula, sign flip)."""
+    q0 = np.asarray(q0, dtype=np.float64)
+    q1 = np.asarray(q1, dtype=np.float64)
+    d = np.sum(q0 * q1, -1, keepdims=True)
+    q1 = np.where(d < 0, -q1, q1)
+    d = np.abs(d)
+    th = np.arccos(np.clip(d, -1, 1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s0 = np.where(th > 1e-9, np.sin((1 - a) * th) / np.sin(th), 1 - a)
+        s1 = np.where(th > 1e-9, np.sin(a * th) / np.sin(th), a)
+    q = s0 * q0 + s1 * q1
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
 # -- minimal sphere ---------------------------------------------------------------------------
@@ -169,6 +258,76 @@ def min_sphere_brute(points, rel=1e-9):
     return best
 
 
+def dual_lower_bound(points, weights):
+    """A lower bound of the minimal enclosing radius from any convex weights (the Lagrange dual).
+
+    For weights ``l >= 0`` summing to 1 and ``m = sum l_i p_i``, every centre ``c`` has
+    ``max_i |p_i - c|^2 >= sum l_i |p_i - c|^2 = sum l_i |p_i - m|^2 + |m - c|^2``, so
+    ``sqrt(sum l_i |p_i - m|^2) <= r*``, whoever chose the weights."""
+    p = np.asarray(points, dtype=np.float64)
+    lam = np.clip(np.asarray(weights, dtype=np.float64), 0, None)
+    lam = lam / lam.sum()
+    m = lam @ p
+    return float(np.sqrt(lam @ np.einsum("ij,ij->i", p - m, p - m)))
+
+
+def support_weights(points, center, radius, rel=1e-9):
+    """Convex weights on the points farthest from ``center`` (within ``rel`` of ``radius``) whose
+    mean is as close to ``center`` as non-negative least squares gets it (the KKT condition of the
+    minimal sphere: its centre is a convex combination of the boundary points)."""
+    p = np.asarray(points, dtype=np.float64)
+    d = np.linalg.norm(p - center, axis=1)
+    on = np.nonzero(d >= radius * (1 - rel) - 1e-300)[0]
+    big = 1e3 * max(radius, 1e-300)  # weighs the sum-to-one row
+    A = np.vstack([(p[on] - center).T, np.full(len(on), big)])
+    b = np.r_[np.zeros(3), big]
+    lam_on, _ = nnls(A, b)
+    lam = np.zeros(len(p))
+    lam[on] = lam_on
+    return lam
+
+
+def min_sphere_bounds(points):
+    """Bracket the minimal enclosing sphere of ``points`` (n, 3) without project code.
+
+    Upper bound: the farthest point from the centre scipy's SLSQP finds for ``min t`` subject to
+    ``|p_i - c|^2 <= t`` (any centre gives an enclosing sphere), polished by the exact sphere of
+    the best support set (<= 4 points) among the points nearly farthest from it.  Lower bound:
+    :func:`dual_lower_bound` with :func:`support_weights` there.  Returns ``(centre, lower,
+    upper)`` with ``lower <= r* <= upper`` guaranteed (up to float64 rounding)."""
+    p = np.asarray(points, dtype=np.float64)
+    c0 = (p.min(0) + p.max(0)) / 2
+    if len(p) > 1:
+        scale = max(float(np.abs(p - c0).max()), 1e-300)
+        q = (p - c0) / scale  # well-scaled for the optimiser
+        t0 = float(np.einsum("ij,ij->i", q, q).max())
+        res = minimize(lambda x: x[3], np.r_[0.0, 0.0, 0.0, t0], jac=lambda x: np.r_[0.0, 0.0, 0.0, 1.0],
+                       method="SLSQP", options={"maxiter": 500, "ftol": 1e-15},
+                       constraints=[{"type": "ineq",
+                                     "fun": lambda x: x[3] - np.einsum("ij,ij->i", q - x[:3], q - x[:3]),
+                                     "jac": lambda x: np.c_[2 * (q - x[:3]), np.ones(len(q))]}])
+        c0 = c0 + scale * res.x[:3]
+    center = c0
+    upper = float(np.linalg.norm(p - center, axis=1).max())
+    # polish: the exact sphere of the best support set among the points nearly farthest from the
+    # centre, until that no longer improves (the optimiser stops a little short on round inputs)
+    for _ in range(20):
+        best = upper
+        cand = np.argsort(-np.linalg.norm(p - center, axis=1))[:10]
+        for size in range(1, min(4, len(cand)) + 1):
+            for idx in itertools.combinations(cand, size):
+                s = circumsphere(p[list(idx)])
+                if s is None:
+                    continue
+                r = float(np.linalg.norm(p - s[0], axis=1).max())
+                if r < upper:
+                    center, upper = s[0], r
+        if upper >= best:
+            break
+    lower = dual_lower_bound(p, support_weights(p, center, upper)) if upper > 0 else 0.0
+    return center, min(lower, upper), upper
+
+
 # -- simplify: edge collapses -----------------------------------------------------------------
 
 def interior_vertices(triangles, n):
@@ -199,13 +358,20 @@ def apply_collapses(positions, triangles, collapses, stop_faces=0, limit=None, v
 
     Returns ``(positions (n, 3) of every vertex, live triangles (list of tuples), accepted
     (k,) bool)``."""
-    from pipeline.geometry.collapse import vertex_quadrics
-
     P = np.asarray(positions, dtype=np.float64).copy()
     n = len(P)
     tris = {f: [int(v) for v in t] for f, t in enumerate(np.asarray(triangles))}
     locked = ~interior_vertices(triangles, n)
-    A, b, w = (x.copy() for x in vertex_quadrics(P, np.asarray(triangles)))
+    # area-weighted plane quadrics, each face's area shared by its three corners
+    A, b, w = np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros(n)
+    for t in tris.values():
+        cr = np.cross(P[t[1]] - P[t[0]], P[t[2]] - P[t[0]])
+        area = 0.5 * np.linalg.norm(cr)
+        nrm = cr / (2 * area) if area > 0 else cr
+        for v in t:
+            A[v] += area / 3 * np.outer(nrm, nrm)
+            b[v] += area / 3 * (nrm @ P[t[0]]) * nrm
+            w[v] += area / 3
     C = P.copy()                              # cluster centroids
     R = np.zeros(n)                           # cluster radius bounds
     shell = np.zeros(n, np.int64) if vertex_shell is None else np.asarray(vertex_shell)

@@ -1,27 +1,59 @@
-"""Bad input: exit 1 (2 for usage), one clear line naming the file, no traceback, no output left."""
+"""Bad input: exit 1 (2 for usage), one clear line naming the file, no traceback, no warning, no
+output left.  In process through click's CliRunner on the real ``colossus`` group (the statuses
+come from ``pipeline.cli.maps_errors``); ``capfd`` also catches anything a C library writes
+straight to the file descriptors.  tests/test_cli.py keeps one subprocess smoke test of the
+installed entry point."""
 
 import os
 import shutil
-import subprocess
-import sys
+import warnings
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
 from conftest import SAMPLES
 
-COLOSSUS = [sys.executable, "-m", "pipeline.cli"]
+#: Warning categories Python hides by default (what a user running ``colossus`` never sees).
+HIDDEN = (DeprecationWarning, PendingDeprecationWarning, ImportWarning, ResourceWarning)
 
 
-def run_import(src, out):
-    return subprocess.run(COLOSSUS + ["import", str(src), "-o", str(out)], capture_output=True, text=True, timeout=120)
+class Run:
+    """One in-process ``colossus`` run: exit status, Python-level stdout/stderr (CliRunner), what
+    reached the file descriptors (capfd), and every warning shown to a user."""
+
+    def __init__(self, args, capfd):
+        from pipeline.cli import main
+        capfd.readouterr()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            r = CliRunner().invoke(main, [str(a) for a in args], prog_name="colossus")
+        fd_out, fd_err = capfd.readouterr()
+        self.returncode, self.stdout, self.stderr = r.exit_code, r.stdout, r.stderr
+        self.exception = r.exception
+        self.fd_output = fd_out + fd_err
+        self.warnings = [f"{w.category.__name__}: {w.message}" for w in caught if not issubclass(w.category, HIDDEN)]
+
+
+@pytest.fixture
+def colossus(capfd):
+    return lambda *args: Run(args, capfd)
+
+
+@pytest.fixture
+def run_import(colossus):
+    return lambda src, out, *extra: colossus("import", src, "-o", out, *extra)
 
 
 def assert_clean_failure(proc, out, needle, code=1):
     assert proc.returncode == code, proc.stderr
+    assert isinstance(proc.exception, SystemExit), proc.exception  # exited; nothing escaped
+    assert proc.stdout == "" and proc.fd_output == "", (proc.stdout, proc.fd_output)
+    assert proc.warnings == []
     err = proc.stderr.strip()
     assert "Traceback" not in err
     assert len(err.splitlines()) == 1, err
+    assert err.startswith("error: ")
     assert needle in err, err
     assert not os.path.exists(out)
     folder = os.path.dirname(out) or "."
@@ -45,13 +77,13 @@ def _edit_usd(tmp_path, fn, name="edited.usda"):
     return dst
 
 
-def test_missing_path(work):
+def test_missing_path(work, run_import):
     out = work / "o.usda"
     assert_clean_failure(run_import(work / "nope.glb", out), out, "nope.glb: no such file")
 
 
 @pytest.mark.parametrize("ext", ["glb", "fbx", "usda"])
-def test_zero_byte(work, ext):
+def test_zero_byte(work, ext, run_import):
     src = work / f"empty.{ext}"
     src.write_bytes(b"")
     out = work / "o.usda"
@@ -59,7 +91,7 @@ def test_zero_byte(work, ext):
 
 
 @pytest.mark.parametrize("ext", ["glb", "fbx", "usda"])
-def test_truncated(work, ext):
+def test_truncated(work, ext, run_import):
     data = (SAMPLES / f"creature.{ext}").read_bytes()
     src = work / f"trunc.{ext}"
     src.write_bytes(data[: len(data) // 3])
@@ -68,14 +100,14 @@ def test_truncated(work, ext):
 
 
 @pytest.mark.parametrize("ext", ["glb", "fbx", "dae", "usda", "usdc"])
-def test_random_bytes(work, ext):
+def test_random_bytes(work, ext, run_import):
     src = work / f"random.{ext}"
     src.write_bytes(np.random.default_rng(7).integers(0, 256, 50_000, dtype=np.uint8).tobytes())
     out = work / "o.usda"
     assert_clean_failure(run_import(src, out), out, f"random.{ext}")
 
 
-def test_nan_positions(work):
+def test_nan_positions(work, run_import):
     def nan(stage, mesh):
         pts = mesh.GetAttribute("points").Get()
         pts[5] = (float("nan"), 0.0, 0.0)
@@ -85,7 +117,7 @@ def test_nan_positions(work):
     assert_clean_failure(run_import(src, out), out, "NaN or infinite")
 
 
-def test_infinite_positions(work):
+def test_infinite_positions(work, run_import):
     def inf(stage, mesh):
         pts = mesh.GetAttribute("points").Get()
         pts[0] = (float("inf"), 0.0, 0.0)
@@ -95,7 +127,7 @@ def test_infinite_positions(work):
     assert_clean_failure(run_import(src, out), out, "NaN or infinite")
 
 
-def test_joint_index_out_of_range(work):
+def test_joint_index_out_of_range(work, run_import):
     def bad(stage, mesh):
         attr = mesh.GetAttribute("primvars:skel:jointIndices")
         v = attr.Get()
@@ -106,7 +138,7 @@ def test_joint_index_out_of_range(work):
     assert_clean_failure(run_import(src, out), out, "out of range")
 
 
-def test_mesh_without_skin(work):
+def test_mesh_without_skin(work, run_import):
     import trimesh
     src = work / "box.glb"
     trimesh.creation.box().export(src)
@@ -114,7 +146,7 @@ def test_mesh_without_skin(work):
     assert_clean_failure(run_import(src, out), out, "no skinned mesh")
 
 
-def test_empty_scene_usd(work):
+def test_empty_scene_usd(work, run_import):
     from pxr import Usd
     src = work / "empty_scene.usda"
     stage = Usd.Stage.CreateNew(str(src))
@@ -123,7 +155,7 @@ def test_empty_scene_usd(work):
     assert_clean_failure(run_import(src, out), out, "has no mesh")
 
 
-def test_empty_scene_gltf(work):
+def test_empty_scene_gltf(work, run_import):
     src = work / "empty_scene.gltf"
     src.write_text('{"asset": {"version": "2.0"}, "scenes": [{"nodes": []}], "scene": 0}')
     out = work / "o.usda"
@@ -131,38 +163,38 @@ def test_empty_scene_gltf(work):
     assert_clean_failure(proc, out, "empty_scene.gltf")
 
 
-def test_unsupported_extension(work):
+def test_unsupported_extension(work, run_import):
     src = work / "notes.txt"
     src.write_text("hello")
     out = work / "o.usda"
     assert_clean_failure(run_import(src, out), out, "unsupported file type")
 
 
-def test_output_dir_missing(work):
+def test_output_dir_missing(work, run_import):
     out = work / "no" / "such" / "dir" / "o.usda"
     assert_clean_failure(run_import(SAMPLES / "limb.glb", out), out, "does not exist")
 
 
-def test_output_dir_not_writable(work):
+def test_output_dir_not_writable(work, run_import):
     out = "/proc/colossus-test.usda"  # not writable, even for root
     proc = run_import(SAMPLES / "limb.glb", out)
     assert_clean_failure(proc, out, "colossus-test.usda")
 
 
-def test_output_bad_extension(work):
+def test_output_bad_extension(work, run_import):
     out = work / "o.obj"
     assert_clean_failure(run_import(SAMPLES / "limb.glb", out), out, "output must end in")
 
 
-def test_usage_error_exit_2(work):
-    proc = subprocess.run(COLOSSUS + ["import", str(SAMPLES / "limb.glb")], capture_output=True, text=True)
-    assert proc.returncode == 2
-    proc = subprocess.run(COLOSSUS + ["import", str(SAMPLES / "limb.glb"), "-o", str(work / "o.usda"),
-                                      "--max-influences", "0"], capture_output=True, text=True)
-    assert proc.returncode == 2 and not (work / "o.usda").exists()
+def test_usage_error_exit_2(work, colossus):
+    proc = colossus("import", SAMPLES / "limb.glb")
+    assert proc.returncode == 2 and "Missing option '-o'" in proc.stderr and proc.stdout == ""
+    proc = colossus("import", SAMPLES / "limb.glb", "-o", work / "o.usda", "--max-influences", "0")
+    assert proc.returncode == 2 and "--max-influences" in proc.stderr and not (work / "o.usda").exists()
+    assert "Traceback" not in proc.stderr and proc.warnings == []
 
 
-def test_unweighted_vertex_is_error_then_nearest_bone(work):
+def test_unweighted_vertex_is_error_then_nearest_bone(work, run_import):
     def unweight(stage, mesh):
         attr = mesh.GetAttribute("primvars:skel:jointWeights")
         v = attr.Get()
@@ -173,10 +205,9 @@ def test_unweighted_vertex_is_error_then_nearest_bone(work):
     src = _edit_usd(work, unweight)
     out = work / "o.usda"
     assert_clean_failure(run_import(src, out), out, "no skin weight")
-    proc = subprocess.run(COLOSSUS + ["import", str(src), "-o", str(out), "--unweighted", "nearest-bone"],
-                          capture_output=True, text=True, timeout=120)
+    proc = run_import(src, out, "--unweighted", "nearest-bone")
     assert proc.returncode == 0, proc.stderr
-    assert out.exists()
+    assert out.exists() and proc.warnings == []
 
 
 def test_allocation_cap(work, monkeypatch):

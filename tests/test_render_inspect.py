@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from PIL import Image
-from pxr import Usd
 
 from conftest import SAMPLES
+from usd_fixture import open_copy
 from validators.cli import validate_cmd
 from validators.cli_inspect import inspect_cmd
 from validators.cli_render import render_cmd
@@ -33,7 +33,7 @@ def assets(imported, tmp_path_factory):
     d = tmp_path_factory.mktemp("render")
     creature = imported("creature", "glb")[1]
     limb = imported("limb", "glb")[1]
-    stage = Usd.Stage.Open(str(creature))
+    stage = open_copy(creature)  # never edit the layer other readers of the file share
     mesh = stage.GetDefaultPrim().GetChild("Collider")
     joints = [str(j) for j in mesh.GetAttribute("colossus:parts:joints").Get()]
     p = [j.rsplit("/", 1)[-1] for j in joints].index(BROKEN_JOINT)

@@ -260,6 +260,34 @@ def b508(s):
     s.GetPrimAtPath(SKEL).GetRelationship("skel:animationSource").SetTargets([Sdf.Path(f"{ROOT}/twist")])
 
 
+def b311(s):
+    """A blend shape bound to the collision mesh."""
+    shape = UsdSkel.BlendShape.Define(s, f"{MESH}/smile")
+    shape.CreateOffsetsAttr(Vt.Vec3fArray([Gf.Vec3f(0, 0.1, 0)]))
+    shape.CreatePointIndicesAttr(Vt.IntArray([0]))
+    b = UsdSkel.BindingAPI(s.GetPrimAtPath(MESH))
+    b.CreateBlendShapesAttr(["smile"])
+    b.CreateBlendShapeTargetsRel().SetTargets([shape.GetPath()])
+
+
+def b407(s):
+    """Fails only between frames: ``bend`` swings mid and tip +-0.9 rad on alternate frames
+    (straight half-way), centres moved off-axis, radii exactly as tight as the frames allow (the
+    exact farthest vertex over every frame, from the proof run without its continuous part)."""
+    from usd_fixture import clip_locals
+    from validators import frameproof as fp
+    from validators.asset import LoadedAsset
+
+    times, _, q, _ = clip_locals("swing", 24)
+    ra = _attr(s, f"{ROOT}/bend", "rotations")
+    for i, tc in enumerate(times):
+        ra.Set(Vt.QuatfArray.FromNumpy(np.ascontiguousarray(q[i], dtype=np.float32)), tc)
+    _edit(s, MESH, "colossus:parts:centers", lambda c: np.tile(np.float32([0.5, 0.5, 0.0]), (len(c), 1)))
+    asset = LoadedAsset(s)
+    tight = fp.tightest(asset, fp.prove(asset, continuous=False), 0.0)
+    _edit(s, MESH, "colossus:parts:radii", lambda r: (tight * (1 + 1e-6) + 1e-5).astype(np.float32))
+
+
 def b701(s):
     # a proxy (its provenance says it was simplified) that lost its deviation
     s.GetPrimAtPath(MESH).SetCustomDataByKey("colossus:proxy:sourceFaces", 100000)

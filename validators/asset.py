@@ -16,7 +16,9 @@ from functools import cached_property
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel
 
+from runtime import asset as runtime_asset
 from runtime import schema
+from runtime.errors import ColliderError
 
 from . import tolerances as tol
 
@@ -414,4 +416,34 @@ class LoadedAsset:
             ok, why = self.ready(need)
             if not ok:
                 return ok, why
+        if self.blend_shapes:
+            return False, f"the mesh has UsdSkel blend shapes ({self.blend_shapes}), which the proof does not model"
+        try:
+            for c in self.clips:
+                self.clip_data(c)
+        except ColliderError as e:
+            return False, f"a clip cannot be read: {e}"
         return True, ""
+
+    # -- the certificate's view ----------------------------------------------------------------
+    @cached_property
+    def blend_shapes(self) -> str:
+        """What UsdSkel blend shapes the mesh binds ("" for none): :func:`runtime.asset.blend_shapes`."""
+        return runtime_asset.blend_shapes(self.mesh) if self.mesh is not None else ""
+
+    def clip_data(self, clip: Clip):
+        """The clip's raw samples as :class:`runtime.asset.ClipData` (what UsdSkel interpolates
+        between frames); raises :class:`runtime.errors.ColliderError` when they are malformed."""
+        cache = self.__dict__.setdefault("_clip_data", {})
+        if clip.name not in cache:
+            cache[clip.name] = runtime_asset.read_clip(clip.prim, self.joint_index)
+        return cache[clip.name]
+
+    @cached_property
+    def rig(self):
+        """The asset as :class:`runtime.certify.Rig` (needs ``ready("proof")``)."""
+        from runtime.certify import Rig
+
+        poff, pverts = self.part_vertices
+        return Rig(self.points, self.jidx, self.jw, self.geom_bind, self.bind, self.rest, self.parents,
+                   self.part_joint_ids, self.part_centers, self.part_radii, poff, pverts, self.skel_world)

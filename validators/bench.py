@@ -4,9 +4,11 @@ the many-assets scale run (``run_scale_bench() -> dict``, ``colossus bench --onl
 A synthetic 20,000-vertex, 40-joint, 4-influence skinned mesh with 500 frames.  Measures, in the
 same run and on the same data:
 
-* ``proof``: the whole frame proof as :func:`validators.frameproof.prove` runs it per chunk of
-  frames (skinning transforms, moved spheres, compiled skinning + containment of every vertex of
-  every part), in vertex-frames per second;
+* ``proof``: the sampled proof as :func:`validators.frameproof.prove` runs it per chunk of
+  frames (:func:`runtime.certify.sampled`: tests K and D, exact skinning where they cannot
+  decide), with each tier's share of the (part, frame) pairs;
+* ``continuous``: the certificate for every time between frames
+  (:func:`runtime.certify.continuous`), as a ratio of the sampled proof;
 * ``usd_lbs_serial`` / ``usd_lbs_parallel``: ``UsdSkel.SkinPointsLBS`` skinning alone (usd-core's
   C++), one call per frame, ``inSerial=True`` (its default) and ``False``.
 
@@ -41,7 +43,7 @@ def synthetic_rig(n=20000, b=40, k=4, frames=500, seed=0):
     bind = np.repeat(np.eye(4)[None], b, 0)
     bind[:, 1, 3] = np.arange(b)
     t = np.arange(frames)[:, None] * 0.05 + np.arange(b)[None] * 0.3
-    ang = 0.15 * np.sin(t)  # (f, b) bend per joint about Z
+    ang = 0.15 * np.sin(t)  # (f, b) bend per joint about Z (Rotation-free: the quaternions are exact)
     local = np.repeat(np.repeat(np.eye(4)[None, None], frames, 0), b, 1)
     c, s = np.cos(ang), np.sin(ang)
     local[..., 0, 0], local[..., 0, 1], local[..., 1, 0], local[..., 1, 1] = c, -s, s, c
@@ -55,21 +57,52 @@ def synthetic_rig(n=20000, b=40, k=4, frames=500, seed=0):
     poff = np.searchsorted(owner[order], np.arange(b + 1)).astype(np.int64)
     return {"points": pts, "jidx": ji, "jw": jw, "bind": bind, "skel": skel, "part_joints": np.arange(b),
             "part_offsets": poff, "part_vertices": order.astype(np.int32),
-            "centers": np.tile([0.0, 0.5, 0.0], (b, 1)), "radii": np.full(b, 2.0)}
+            "centers": np.tile([0.0, 0.5, 0.0], (b, 1)), "radii": np.full(b, 2.0), "angles": ang}
 
 
-def _proof(r, chunk):
-    inv_bind = np.linalg.inv(r["bind"])
-    world = np.eye(4)
+def rig_of(r, radii=None):
+    """The synthetic rig as :class:`runtime.certify.Rig` and its clip as ``ClipData`` (the local
+    transforms' rotations about Z as quaternions, translations, unit scales)."""
+    from runtime.asset import ClipData
+    from runtime.certify import Rig
+
+    b = len(r["bind"])
     F = len(r["skel"])
-    worst = -np.inf
+    parents = np.arange(b) - 1
+    rest = np.repeat(np.eye(4)[None], b, 0)
+    rest[1:, 1, 3] = 1.0
+    rig = Rig(r["points"], r["jidx"], r["jw"], np.eye(4), r["bind"], rest, parents, r["part_joints"], r["centers"],
+              r["radii"] if radii is None else radii, r["part_offsets"], r["part_vertices"])
+    ang = r["angles"]
+    q = np.zeros((F, b, 4))
+    q[..., 2], q[..., 3] = np.sin(ang / 2), np.cos(ang / 2)
+    t = np.zeros((F, b, 3))
+    t[:, 1:, 1] = 1.0
+    times = np.arange(F, dtype=np.float64)
+    clip = ClipData("bend", "/bend", times, t, times, q.astype(np.float32).astype(np.float64), times,
+                    np.ones((F, b, 3)), np.arange(b), times)
+    return rig, clip
+
+
+def _proof(rig, skel, chunk, tol_abs=1e-6):
+    """The sampled proof (tiers K, D, exact) over every frame, chunk by chunk: returns the
+    frame bounds, verdicts and per-tier counts."""
+    from runtime.certify import sampled
+    F, P = len(skel), rig.P
+    bound = np.empty((F, P))
+    ok = np.empty((F, P), bool)
+    tiers = np.zeros(3, np.int64)
     for lo in range(0, F, chunk):
-        skel = r["skel"][lo:lo + chunk]
-        sk = fp.skinning_transforms(skel, inv_bind, None, world)
-        wc, wr, _ = fp.world_spheres(world @ skel, r["part_joints"], r["centers"], r["radii"])
-        d, _ = fp.part_farthest(r["points"], r["jidx"], r["jw"], sk, r["part_offsets"], r["part_vertices"], wc)
-        worst = max(worst, float((d - wr).max()))
-    return worst
+        s = sampled(rig, skel[lo:lo + chunk], tol_abs, 1e-5)
+        bound[lo:lo + chunk] = s.bound
+        ok[lo:lo + chunk] = ~(s.bound > s.spheres[..., 3] * (1 + 1e-5) + tol_abs)
+        tiers += np.bincount(s.tier.ravel(), minlength=3)
+    return bound, ok, tiers
+
+
+def _continuous(rig, clip, bound, ok, tol_abs=1e-6):
+    from runtime.certify import continuous
+    return continuous(rig, clip, clip.times, bound, ok, tol_abs, 1e-5)
 
 
 def _usd_lbs(r, serial):
@@ -79,7 +112,7 @@ def _usd_lbs(r, serial):
     jw = Vt.FloatArray.FromNumpy(r["jw"].ravel())
     k = r["jidx"].shape[1]
     gb = Gf.Matrix4d(1)
-    xforms = np.ascontiguousarray((r["skel"] @ inv_bind).transpose(0, 1, 3, 2))  # row-vector for Gf
+    xforms = schema.row_vector(r["skel"] @ inv_bind)  # USD's layout, converted by the one schema module
     src = Vt.Vec3fArray.FromNumpy(r["points"])
     t0 = time.perf_counter()
     for f in range(len(xforms)):
@@ -88,26 +121,60 @@ def _usd_lbs(r, serial):
     return time.perf_counter() - t0
 
 
+def _case(r, rig, clip, chunk, repeat):
+    out = {}
+    t_proof, t_cont = np.inf, np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        bound, ok, tiers = _proof(rig, r["skel"], chunk)
+        t_proof = min(t_proof, time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        c = _continuous(rig, clip, bound, ok)
+        t_cont = min(t_cont, time.perf_counter() - t0)
+    out.update(proof_seconds=t_proof, continuous_seconds=t_cont, tiers=tiers.tolist(),
+               intervals=np.bincount(c.status.ravel().astype(np.int64), minlength=6).tolist(), passed=bool(ok.all()),
+               certified=bool((c.status <= 2).all()))
+    return out
+
+
 def run_bench(n=20000, joints=40, influences=4, frames=500, repeat=3) -> dict:
-    """Run the benchmark; returns timings, vertex-frames per second and the speed-up ratios."""
+    """Run the benchmark; returns timings, tier shares and the speed-up ratios.
+
+    Two sphere sets on the same rig: the benchmark's own (radius 2, loose: the bound tiers settle
+    everything) and tight ones (2 % over the exact farthest vertex of every frame, like an
+    imported asset: the exact tier does most of the work)."""
+    from runtime.certify import sampled
+
     r = synthetic_rig(n, joints, influences, frames)
     chunk = fp.chunk_size(joints, joints)
     small = synthetic_rig(200, joints, influences, 3)
-    _proof(small, chunk)  # compile / load the numba cache outside the timing
+    srig, sclip = rig_of(small)
+    _continuous(srig, sclip, *_proof(srig, small["skel"], chunk)[:2])  # compile / load the cache outside timing
+    rig, clip = rig_of(r)
+    exact = sampled(rig, r["skel"][:chunk], 0.0, 0.0, exact=np.ones((min(chunk, frames), joints), bool))
+    far = np.max(exact.dist, axis=0)
+    for lo in range(chunk, frames, chunk):
+        e = sampled(rig, r["skel"][lo:lo + chunk], 0.0, 0.0, exact=np.ones((len(r["skel"][lo:lo + chunk]), joints), bool))
+        far = np.maximum(far, e.dist.max(0))
+    trig, tclip = rig_of(r, radii=far * 1.02)
     vf = n * frames
-    t_proof = min(_timed(lambda: _proof(r, chunk)) for _ in range(repeat))
+    loose = _case(r, rig, clip, chunk, repeat)
+    tight = _case(r, trig, tclip, chunk, repeat)
     t_ser = min(_usd_lbs(r, True) for _ in range(repeat))
     t_par = min(_usd_lbs(r, False) for _ in range(repeat))
     import numba
-    out = {
+    return {
         "vertices": n, "joints": joints, "influences": influences, "frames": frames,
         "vertex_frames": vf, "threads": numba.get_num_threads(), "chunk_frames": chunk,
-        "proof_seconds": t_proof, "proof_vertex_frames_per_s": vf / t_proof,
+        "loose": loose, "tight": tight,
+        "proof_seconds": loose["proof_seconds"], "proof_vertex_frames_per_s": vf / loose["proof_seconds"],
         "usd_lbs_serial_seconds": t_ser, "usd_lbs_serial_vertex_frames_per_s": vf / t_ser,
         "usd_lbs_parallel_seconds": t_par, "usd_lbs_parallel_vertex_frames_per_s": vf / t_par,
-        "speedup_vs_usd_serial": t_ser / t_proof, "speedup_vs_usd_parallel": t_par / t_proof,
+        "speedup_vs_usd_serial": t_ser / loose["proof_seconds"], "speedup_vs_usd_parallel": t_par / loose["proof_seconds"],
+        "tight_speedup_vs_usd_parallel": t_par / tight["proof_seconds"],
+        "continuous_over_sampled": loose["continuous_seconds"] / loose["proof_seconds"],
+        "tight_continuous_over_sampled": tight["continuous_seconds"] / tight["proof_seconds"],
     }
-    return out
 
 
 def _timed(fn):
@@ -116,18 +183,60 @@ def _timed(fn):
     return time.perf_counter() - t0
 
 
+def _shares(counts, names):
+    tot = max(sum(counts), 1)
+    return ", ".join(f"{n} {c / tot:.1%}" for n, c in zip(names, counts) if c or n in names[:1])
+
+
 def format_bench(res: dict) -> str:
     m = 1e6
-    return (f"frame proof: {res['vertices']} vertices x {res['frames']} frames, {res['joints']} joints, "
-            f"{res['influences']} influences, {res['threads']} threads\n"
-            f"  whole proof (skin + containment): {res['proof_seconds']:.3f} s  "
-            f"{res['proof_vertex_frames_per_s'] / m:.1f} M vertex-frames/s\n"
-            f"  UsdSkel.SkinPointsLBS serial:      {res['usd_lbs_serial_seconds']:.3f} s  "
-            f"{res['usd_lbs_serial_vertex_frames_per_s'] / m:.1f} M vertex-frames/s  "
-            f"(proof is {res['speedup_vs_usd_serial']:.2f}x faster)\n"
-            f"  UsdSkel.SkinPointsLBS parallel:    {res['usd_lbs_parallel_seconds']:.3f} s  "
-            f"{res['usd_lbs_parallel_vertex_frames_per_s'] / m:.1f} M vertex-frames/s  "
-            f"(proof is {res['speedup_vs_usd_parallel']:.2f}x faster)")
+    lines = [f"frame proof: {res['vertices']} vertices x {res['frames']} frames, {res['joints']} joints, "
+             f"{res['influences']} influences, {res['threads']} threads",
+             f"  UsdSkel.SkinPointsLBS serial:   {res['usd_lbs_serial_seconds']:.3f} s  "
+             f"{res['usd_lbs_serial_vertex_frames_per_s'] / m:.1f} M vertex-frames/s",
+             f"  UsdSkel.SkinPointsLBS parallel: {res['usd_lbs_parallel_seconds']:.3f} s  "
+             f"{res['usd_lbs_parallel_vertex_frames_per_s'] / m:.1f} M vertex-frames/s"]
+    for key, label in (("loose", "benchmark spheres (radius 2)"), ("tight", "tight spheres (2% over the farthest vertex)")):
+        c = res[key]
+        par = res["usd_lbs_parallel_seconds"] / c["proof_seconds"]
+        lines += [f"  {label}:",
+                  f"    sampled proof (tiers K, D, exact): {c['proof_seconds']:.3f} s, {par:.1f}x faster than "
+                  f"SkinPointsLBS parallel (goal >= 10x on the benchmark spheres); (part, frame) pairs: "
+                  f"{_shares(c['tiers'], ('K', 'D', 'exact'))}; verdict {'PASS' if c['passed'] else 'FAIL'}",
+                  f"    continuous certificate: {c['continuous_seconds']:.3f} s = "
+                  f"{c['continuous_seconds'] / c['proof_seconds']:.2f}x the sampled proof (goal <= 2x); (part, interval) "
+                  f"pairs: {_shares(c['intervals'], ('chord', 'vertex chord', 'subdivided', 'failed', 'undecided', 'not checked'))}; "
+                  f"{'certified' if c['certified'] else 'NOT certified'}"]
+    return "\n".join(lines)
+
+
+def coldstart(echo=print) -> dict:
+    """Cold and warm wall times of the first ``colossus import samples/creature.glb``, ``colossus
+    validate`` and ``load_collider`` + one pose, each in a fresh process with ``NUMBA_CACHE_DIR``
+    pointed at an empty folder (cold), then again with that folder filled (warm)."""
+    import subprocess
+    import sys
+    import tempfile
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    sample = os.path.join(root, "samples", "creature.glb")
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        env = dict(os.environ, NUMBA_CACHE_DIR=os.path.join(tmp, "numba"))
+        asset = os.path.join(tmp, "creature.usda")
+        cmds = {
+            "import": [sys.executable, "-m", "pipeline.cli", "import", sample, "-o", asset],
+            "validate": [sys.executable, "-m", "pipeline.cli", "validate", asset],
+            "load_collider + pose": [sys.executable, "-c", "import sys; from runtime import load_collider; "
+                                     "load_collider(sys.argv[1]).pose('walk', 3.5).points", asset],
+        }
+        for name, cmd in cmds.items():
+            for state in ("cold", "warm"):
+                t0 = time.perf_counter()
+                subprocess.run(cmd, env=env, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=False)
+                out[f"{name} {state}"] = time.perf_counter() - t0
+                echo(f"  {name:<22} {state}: {out[f'{name} {state}']:6.2f} s")
+    return out
 
 
 # ------------------------------------------------------------------------- scale benchmark

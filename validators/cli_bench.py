@@ -11,16 +11,16 @@ import click
 
 from pipeline.bench import bench_import, bench_scaling, bench_simplify
 
-from .bench import format_bench, format_scale_bench, run_bench, run_scale_bench
+from .bench import coldstart, format_bench, format_scale_bench, run_bench, run_scale_bench
 
 
 @click.command("bench")
 @click.option("--quick", is_flag=True, help="Smaller sizes (a smoke run).")
-@click.option("--only", type=click.Choice(["import", "scaling", "simplify", "validate", "runtime", "scale"]), multiple=True,
+@click.option("--only", type=click.Choice(["import", "scaling", "validate", "runtime", "scale", "coldstart", "simplify"]), multiple=True,
               help="Run only these benchmarks (repeatable).")
 def bench_cmd(quick, only):
     """Run the benchmarks; absolute times are this machine's, ratios are against in-process baselines."""
-    want = set(only) or {"import", "scaling", "simplify", "validate", "runtime", "scale"}
+    want = set(only) or {"import", "scaling", "validate", "runtime", "scale", "coldstart", "simplify"}
     click.echo(f"colossus bench on {os.cpu_count()} cores (absolute times are this machine's)\n")
     if "import" in want:
         bench_import(*((20_000, 20, 2, 30) if quick else ()), echo=click.echo)
@@ -37,6 +37,9 @@ def bench_cmd(quick, only):
     if "runtime" in want:
         from runtime.bench import format_rows as rt_format, run_bench as rt_run
         click.echo(rt_format(rt_run()))
+    if "coldstart" in want:
+        click.echo("\ncold start (NUMBA_CACHE_DIR pointed at an empty folder; goal < 5 s cold) and warm:")
+        coldstart(echo=click.echo)
     if "scale" in want:
         click.echo()
         click.echo(format_scale_bench(run_scale_bench(**({"count": 40} if quick else {}))))

@@ -14,7 +14,7 @@ SEVERITIES = ("error", "warning", "info")
 SEVERITY_RANK = {s: i for i, s in enumerate(SEVERITIES)}
 
 #: Location fields a finding may carry, in report order (the contract's JSON names).
-LOCATION_FIELDS = ("prim", "clip", "time", "frame", "part", "joint", "vertex", "face", "excess",
+LOCATION_FIELDS = ("prim", "clip", "time", "interval", "frame", "part", "joint", "vertex", "face", "excess",
                    "fraction", "ratio", "count", "validator")
 
 
@@ -33,7 +33,8 @@ class Finding:
         The rule's name (kebab-case), e.g. ``"holds-on-all-frames"``.
     location : dict
         Any of :data:`LOCATION_FIELDS`: ``clip`` (name), ``time`` (time code), ``frame`` (index in
-        the clip), ``part`` (index), ``joint`` (name), ``vertex`` / ``face`` (index), ``excess``
+        the clip), ``interval`` ([t0, t1] time codes of a finding between frames), ``part`` (index),
+        ``joint`` (name), ``vertex`` / ``face`` (index), ``excess``
         (stage units), ``fraction`` (excess / radius), ``ratio``, ``prim`` (path) ...
     sort_key : float
         Larger is worse; findings of one rule are listed worst first.

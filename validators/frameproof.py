@@ -1,21 +1,25 @@
-"""The frame proof: skin every frame of every clip and test every vertex of every part against
-the part's sphere moved by its joint.
+"""The frame proof: every vertex of every part inside the part's moving sphere, on every
+frame of every clip (tiers K, D, exact) and for every time between the frames (the continuous
+certificate).
 
-Compiled numba kernels (``_``-prefixed, ``@njit(parallel=True, cache=True)``) sit behind
-validating public wrappers.  Geometry is ``float32``; transforms are ``float64`` (arithmetic in
-``float64``).  The proof never holds skinned points: each (frame, part) task skins its part's
-vertices on the fly and keeps only the farthest one, and frames are processed in chunks whose
-per-frame joint matrices stay under :data:`validators.tolerances.CHUNK_BYTES`, so memory is
-``O(vertices + chunk x joints)`` whatever the frame count.
+The machinery is :mod:`runtime.certify` (shared with the import's spheres stage) on the one
+skinning kernel :mod:`runtime.kernels.skin`; the bounds and their soundness arguments are in the
+docstrings of :mod:`runtime.kernels.bounds` and :func:`runtime.certify.continuous`.  This module
+runs it on a :class:`validators.asset.LoadedAsset`, one clip and one chunk of frames at a time
+(memory ``O(vertices + chunk x joints)``), and turns the results into per-part records.
+
+Sampled frames: joint transforms from ``UsdSkel.AnimQuery`` (usd-core itself).  Per (frame,
+part): test K, else test D, else the part is skinned exactly; the verdict is the exact one, and a
+failure names clip, frame, part, joint, vertex and excess.  Between frames: UsdSkel's own
+interpolation (lerp translations and scales, GfSlerp rotations) as the runtime's port computes it.
 
 Public functions
 ----------------
 skinning_transforms(skel, inv_bind, geom_bind=None, world=None) -> (f, b, 4, 4) float64
-skin_frames(points, joint_indices, joint_weights, skin_xforms, out=None) -> (f, n, 3) float32
-part_farthest(points, joint_indices, joint_weights, skin_xforms, part_offsets, part_vertices,
-              centers) -> (distance (f, P) float64, vertex (f, P) int32)
+skin_frames / part_farthest: :mod:`runtime.kernels.skin` (re-exported)
 world_spheres(joint_xforms, part_joints, centers, radii) -> (centers (f, P, 3), radii (f, P), scale (f, P))
-prove(asset, subframes=0, ...) -> Proof
+prove(asset, subframes=0, ..., continuous=True) -> Proof;  merge_proofs(asset, proofs) -> Proof
+tightest(asset, proof) -> (P,) exact tightest radii (for the slack rule)
 """
 
 from __future__ import annotations
@@ -24,102 +28,11 @@ import time as _time
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit, prange
+
+from runtime import certify as C
+from runtime.kernels.skin import part_farthest, skin_frames  # noqa: F401  (the one skinning kernel)
 
 from . import tolerances as tol
-
-
-# --------------------------------------------------------------------------------- kernels
-@njit(cache=True, parallel=True)
-def _skin_kernel(points, jidx, jw, mats, out):
-    F, n, k = mats.shape[0], points.shape[0], jidx.shape[1]
-    for f in range(F):
-        for v in prange(n):
-            x = np.float64(points[v, 0])
-            y = np.float64(points[v, 1])
-            z = np.float64(points[v, 2])
-            ax = 0.0
-            ay = 0.0
-            az = 0.0
-            for i in range(k):
-                w = np.float64(jw[v, i])
-                if w == 0.0:
-                    continue
-                m = mats[f, jidx[v, i]]
-                ax += w * (m[0, 0] * x + m[0, 1] * y + m[0, 2] * z + m[0, 3])
-                ay += w * (m[1, 0] * x + m[1, 1] * y + m[1, 2] * z + m[1, 3])
-                az += w * (m[2, 0] * x + m[2, 1] * y + m[2, 2] * z + m[2, 3])
-            out[f, v, 0] = ax
-            out[f, v, 1] = ay
-            out[f, v, 2] = az
-
-
-#: Frames per task of the containment kernel: each vertex is loaded once per block of frames.
-_FRAME_BLOCK = 8
-
-
-@njit(cache=True, parallel=True, fastmath={"contract", "reassoc", "arcp", "nsz"})
-def _farthest_kernel(points, jidx, jw, mats, poff, pverts, centers, out_d, out_v):
-    """Tasks are (part, block of frames): a vertex is read once and skinned for every frame of
-    the block; per (frame, part) the largest squared distance to the centre is kept."""
-    F, P, k = mats.shape[0], poff.shape[0] - 1, jidx.shape[1]
-    nb = (F + _FRAME_BLOCK - 1) // _FRAME_BLOCK
-    for task in prange(P * nb):
-        p = task // nb
-        f0 = (task % nb) * _FRAME_BLOCK
-        f1 = min(F, f0 + _FRAME_BLOCK)
-        best = np.full(_FRAME_BLOCK, -1.0)
-        bestv = np.full(_FRAME_BLOCK, -1, dtype=np.int32)
-        for s in range(poff[p], poff[p + 1]):
-            v = pverts[s]
-            x = np.float64(points[v, 0])
-            y = np.float64(points[v, 1])
-            z = np.float64(points[v, 2])
-            for f in range(f0, f1):
-                ax = 0.0
-                ay = 0.0
-                az = 0.0
-                for i in range(k):
-                    w = np.float64(jw[v, i])
-                    j = jidx[v, i]
-                    ax += w * (mats[f, j, 0, 0] * x + mats[f, j, 0, 1] * y + mats[f, j, 0, 2] * z + mats[f, j, 0, 3])
-                    ay += w * (mats[f, j, 1, 0] * x + mats[f, j, 1, 1] * y + mats[f, j, 1, 2] * z + mats[f, j, 1, 3])
-                    az += w * (mats[f, j, 2, 0] * x + mats[f, j, 2, 1] * y + mats[f, j, 2, 2] * z + mats[f, j, 2, 3])
-                dx = ax - centers[f, p, 0]
-                dy = ay - centers[f, p, 1]
-                dz = az - centers[f, p, 2]
-                d2 = dx * dx + dy * dy + dz * dz
-                if not (d2 <= 1e300):  # NaN or inf: as far as it gets
-                    d2 = np.inf
-                if d2 > best[f - f0]:
-                    best[f - f0] = d2
-                    bestv[f - f0] = v
-        for f in range(f0, f1):
-            out_d[f, p] = np.sqrt(best[f - f0]) if best[f - f0] >= 0.0 else 0.0
-            out_v[f, p] = bestv[f - f0]
-
-
-# ------------------------------------------------------------------------ public wrappers
-def _check_skin_inputs(points, joint_indices, joint_weights, skin_xforms):
-    points = np.ascontiguousarray(points, dtype=np.float32)
-    ji = np.ascontiguousarray(joint_indices, dtype=np.int32)
-    jw = np.ascontiguousarray(joint_weights, dtype=np.float32)
-    x = np.asarray(skin_xforms, dtype=np.float64)
-    if x.ndim == 3:
-        x = x[None]
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"points: expected (n, 3), got {points.shape}")
-    n = len(points)
-    if ji.ndim != 2 or ji.shape[0] != n:
-        raise ValueError(f"joint_indices: expected ({n}, k), got {ji.shape}")
-    if jw.shape != ji.shape:
-        raise ValueError(f"joint_weights: expected {ji.shape}, got {jw.shape}")
-    if x.ndim != 4 or x.shape[2:] != (4, 4):
-        raise ValueError(f"skin_xforms: expected (f, b, 4, 4), got {x.shape}")
-    if ji.size and (ji.min() < 0 or ji.max() >= x.shape[1]):
-        raise ValueError(f"joint_indices: expected values in [0, {x.shape[1]}), got [{ji.min()}, {ji.max()}]")
-    mats = np.ascontiguousarray(x[:, :, :3, :])
-    return points, ji, jw, mats
 
 
 def skinning_transforms(skel, inv_bind, geom_bind=None, world=None) -> np.ndarray:
@@ -147,65 +60,6 @@ def skinning_transforms(skel, inv_bind, geom_bind=None, world=None) -> np.ndarra
     return m
 
 
-def skin_frames(points, joint_indices, joint_weights, skin_xforms, out=None) -> np.ndarray:
-    """Linear-blend skinning of ``f`` frames (compiled, parallel over vertices).
-
-    Parameters
-    ----------
-    points : (n, 3) float32                  mesh-space points
-    joint_indices : (n, k) int               influencing joints (weight-0 entries are padding)
-    joint_weights : (n, k) float32
-    skin_xforms : (f, b, 4, 4) float64       from :func:`skinning_transforms`
-    out : (f, n, 3) float32, optional
-
-    Returns
-    -------
-    (f, n, 3) float32 skinned points: ``sum_k w[v,k] * skin_xforms[f, j[v,k]] @ p[v]``.
-    """
-    points, ji, jw, mats = _check_skin_inputs(points, joint_indices, joint_weights, skin_xforms)
-    shape = (mats.shape[0], len(points), 3)
-    if out is None:
-        out = np.empty(shape, dtype=np.float32)
-    elif out.shape != shape or out.dtype != np.float32 or not out.flags.c_contiguous:
-        raise ValueError(f"out: expected C-contiguous float32 {shape}, got {out.dtype} {out.shape}")
-    _skin_kernel(points, ji, jw, mats, out)
-    return out
-
-
-def part_farthest(points, joint_indices, joint_weights, skin_xforms, part_offsets, part_vertices,
-                  centers):
-    """For every frame and part, the skinned vertex of the part farthest from ``centers``.
-
-    Parameters
-    ----------
-    points, joint_indices, joint_weights, skin_xforms : as :func:`skin_frames`
-    part_offsets : (P + 1,) int, part_vertices : (sum,) int
-        CSR: vertices of part ``p`` are ``part_vertices[part_offsets[p]:part_offsets[p + 1]]``.
-    centers : (f, P, 3) float64              sphere centres at each frame, same space as the skin
-
-    Returns
-    -------
-    distance : (f, P) float64   distance of the farthest vertex (inf if a skinned point is NaN;
-                                0 for an empty part)
-    vertex : (f, P) int32       its index (-1 for an empty part)
-    """
-    points, ji, jw, mats = _check_skin_inputs(points, joint_indices, joint_weights, skin_xforms)
-    poff = np.ascontiguousarray(part_offsets, dtype=np.int64)
-    pv = np.ascontiguousarray(part_vertices, dtype=np.int32)
-    F, P = mats.shape[0], len(poff) - 1
-    c = np.ascontiguousarray(centers, dtype=np.float64)
-    if c.shape != (F, P, 3):
-        raise ValueError(f"centers: expected ({F}, {P}, 3), got {c.shape}")
-    if P >= 0 and (poff[0] != 0 or poff[-1] != len(pv) or np.any(np.diff(poff) < 0)):
-        raise ValueError("part_offsets: expected non-decreasing from 0 to len(part_vertices)")
-    if pv.size and (pv.min() < 0 or pv.max() >= len(points)):
-        raise ValueError(f"part_vertices: expected values in [0, {len(points)})")
-    d = np.empty((F, P), dtype=np.float64)
-    v = np.empty((F, P), dtype=np.int32)
-    _farthest_kernel(points, ji, jw, mats, poff, pv, c, d, v)
-    return d, v
-
-
 def world_spheres(joint_xforms, part_joints, centers, radii):
     """Part spheres moved by their joints.
 
@@ -227,13 +81,19 @@ def world_spheres(joint_xforms, part_joints, centers, radii):
 
 
 # ------------------------------------------------------------------------------ the proof
+TIER_NAMES = ("K", "D", "exact")
+#: Names of :class:`runtime.certify.Continuous` statuses in the stats.
+INTERVAL_NAMES = ("chord", "vertex_chord", "subdivided", "failed", "undecided", "not_checked")
+
+
 @dataclass
 class PartResult:
-    """Worst case of one part over one clip (times checked: frames plus subframes)."""
+    """Worst case of one part over one clip at the checked times (frames plus subframes), from
+    the times where the part was skinned exactly (a time the bounds settled is inside)."""
 
     clip: str
     part: int
-    excess: float = -np.inf     # stage units, max over times of farthest distance - radius
+    excess: float = -np.inf     # stage units, max over exactly checked times of farthest - radius
     fraction: float = 0.0       # excess / world radius at that time
     time: float = 0.0
     frame: int = 0              # index of the frame at or before ``time`` in the clip
@@ -246,24 +106,46 @@ class PartResult:
 class Proof:
     """Result of :func:`prove`.
 
-    ``results``: one :class:`PartResult` per (clip, part).  ``tightest``: (P,) the largest
-    joint-space farthest-vertex distance over every checked time (what the radius must be at
-    least).  ``checked`` / ``not_checked``: plain-language lists for the report.
+    ``results``: one :class:`PartResult` per (clip, part).  ``tight_lo`` / ``tight_hi``: (P,)
+    a lower and an upper bound of the largest joint-space farthest-vertex distance over every
+    checked time (:func:`tightest` makes it exact when the slack rule needs it).  ``tiers``: how
+    many (part, time) pairs tests K, D and exact skinning settled.  ``between``: the intervals
+    the continuous certificate could not certify (dicts: clip, part, t0, t1, time, vertex,
+    excess, definite); ``intervals``: how many (part, interval) pairs each level settled.
+    ``checked`` / ``not_checked``: plain-language lists for the report.
     """
 
     results: list = field(default_factory=list)
-    tightest: np.ndarray = None
+    tight_lo: np.ndarray = None
+    tight_hi: np.ndarray = None
     tolerance: float = 0.0
     frames: int = 0
     subframe_times: int = 0
+    subframes: int = 0
     vertex_frames: int = 0
+    skinned_vertex_frames: int = 0
+    tiers: dict = field(default_factory=lambda: dict.fromkeys(TIER_NAMES, 0))
+    continuous: bool = True
+    intervals: dict = field(default_factory=lambda: dict.fromkeys(INTERVAL_NAMES, 0))
+    between: list = field(default_factory=list)
+    clip_ranges: dict = field(default_factory=dict)
     seconds: float = 0.0
+    continuous_seconds: float = 0.0
     checked: list = field(default_factory=list)
     not_checked: list = field(default_factory=list)
+    _tightest: np.ndarray = None
+
+    @property
+    def tightest(self) -> np.ndarray:
+        """(P,) the exact tightest radii when :func:`tightest` has run, else the upper bound."""
+        return self._tightest if self._tightest is not None else self.tight_hi
 
     def stats(self) -> dict:
         return {"frames": self.frames, "subframe_times": self.subframe_times,
-                "vertex_frames": self.vertex_frames, "seconds": round(self.seconds, 4),
+                "vertex_frames": self.vertex_frames, "skinned_vertex_frames": self.skinned_vertex_frames,
+                "tiers": dict(self.tiers), "continuous": self.continuous,
+                "intervals": dict(self.intervals) if self.continuous else {},
+                "seconds": round(self.seconds, 4),
                 "tolerance": self.tolerance, "checked": self.checked, "not_checked": self.not_checked}
 
 
@@ -290,12 +172,13 @@ def chunk_size(joint_count: int, part_count: int = 0) -> int:
     return int(max(1, min(tol.CHUNK_FRAMES, tol.CHUNK_BYTES // max(per_frame, 1))))
 
 
-def prove(asset, subframes: int = 0, chunk_frames: int | None = None, clips=None) -> Proof:
-    """Run the frame proof on a :class:`validators.asset.LoadedAsset` whose ``ready("proof")``.
+def prove(asset, subframes: int = 0, chunk_frames: int | None = None, clips=None, continuous: bool = True) -> Proof:
+    """Run the proof on a :class:`validators.asset.LoadedAsset` whose ``ready("proof")``.
 
-    For every clip and every checked time: joint local transforms from ``UsdSkel.AnimQuery``
-    (its own interpolation at in-between times), composed to skeleton space, skinned and tested
-    in compiled code, one chunk of times at a time.
+    For every clip and every checked time: joint local transforms from ``UsdSkel.AnimQuery``,
+    composed to skeleton space, certified by :func:`runtime.certify.sampled` (tiers K, D, exact),
+    one chunk of times at a time.  Then, with ``continuous``, every interval between consecutive
+    frames by :func:`runtime.certify.continuous`.
 
     ``clips``: names of the clips to prove (default all).  Clips are independent, so proofs of
     disjoint clip sets combine with :func:`merge_proofs` into exactly the proof of them all
@@ -304,11 +187,12 @@ def prove(asset, subframes: int = 0, chunk_frames: int | None = None, clips=None
     t0 = _time.perf_counter()
     P = len(asset.part_joints)
     poff, pverts = asset.part_vertices
-    pj = asset.part_joint_ids
     tolerance = tol.CONTAIN_RELATIVE * asset.model_size
-    proof = Proof(tightest=np.zeros(P), tolerance=tolerance)
+    proof = Proof(tight_lo=np.zeros(P), tight_hi=np.zeros(P), tolerance=tolerance, continuous=continuous,
+                  subframes=subframes)
     chunk = chunk_frames or chunk_size(len(asset.joints), P)
-    inv_bind = asset.inv_bind
+    rig = asset.rig
+    radii = np.asarray(asset.part_radii, dtype=np.float64)
     for clip in asset.clips:
         if clips is not None and clip.name not in clips:
             continue
@@ -316,22 +200,32 @@ def prove(asset, subframes: int = 0, chunk_frames: int | None = None, clips=None
             continue
         times, fidx, is_sub = clip_times(clip.times, subframes)
         res = [PartResult(clip.name, p) for p in range(P)]
+        fbound = np.zeros((len(clip.times), P))
+        fok = np.ones((len(clip.times), P), bool)
         for lo in range(0, len(times), chunk):
             t = times[lo:lo + chunk]
             skel = asset.skel_transforms(asset.anim_local(clip, t))
-            joint_world = asset.skel_world @ skel
-            sk = skinning_transforms(skel, inv_bind, asset.geom_bind, asset.skel_world)
-            wc, wr, scale = world_spheres(joint_world, pj, asset.part_centers, asset.part_radii)
-            d, v = part_farthest(asset.points, asset.jidx, asset.jw, sk, poff, pverts, wc)
-            proof.tightest = np.maximum(proof.tightest, np.max(d / scale, axis=0))
-            excess = d - wr
+            s = C.sampled(rig, skel, tolerance, tol.CONTAIN_RADIUS)
+            for k, name in enumerate(TIER_NAMES):
+                proof.tiers[name] += int((s.tier == k).sum())
+            exact = s.tier == 2
+            proof.skinned_vertex_frames += int((exact * np.diff(poff)[None]).sum())
+            wr = s.spheres[..., 3]
+            scale = wr / np.where(radii > 0, radii, 1.0)[None]
+            proof.tight_hi = np.maximum(proof.tight_hi, np.max(s.bound / scale, axis=0))
+            with np.errstate(invalid="ignore"):
+                proof.tight_lo = np.maximum(proof.tight_lo, np.nanmax(np.where(exact, s.dist / scale, 0.0), axis=0))
+                excess = np.where(exact, s.dist - wr, -np.inf)
             fail = excess > tolerance + tol.CONTAIN_RADIUS * wr
+            frames_here = ~is_sub[lo:lo + chunk]
+            fbound[fidx[lo:lo + chunk][frames_here]] = s.bound[frames_here]
+            fok[fidx[lo:lo + chunk][frames_here]] = ~fail[frames_here]
             worst = np.argmax(excess, axis=0)
-            for p in np.nonzero(fail.any(axis=0) | (excess[worst, np.arange(P)] > [r.excess for r in res]))[0]:
+            for p in range(P):
                 r, i = res[p], worst[p]
                 if excess[i, p] > r.excess:
                     r.excess, r.fraction = float(excess[i, p]), float(excess[i, p] / wr[i, p])
-                    r.time, r.frame, r.vertex = float(t[i]), int(fidx[lo + i]), int(v[i, p])
+                    r.time, r.frame, r.vertex = float(t[i]), int(fidx[lo + i]), int(s.vertex[i, p])
                 nf = int(fail[:, p].sum())
                 if nf:
                     if r.first_fail_time is None:
@@ -341,6 +235,15 @@ def prove(asset, subframes: int = 0, chunk_frames: int | None = None, clips=None
         proof.frames += len(clip.times)
         proof.subframe_times += int(is_sub.sum())
         proof.vertex_frames += len(times) * len(pverts)
+        proof.clip_ranges[clip.name] = (float(clip.times[0]), float(clip.times[-1]))
+        if continuous and len(clip.times) > 1:
+            tc = _time.perf_counter()
+            c = C.continuous(rig, asset.clip_data(clip), clip.times, fbound, fok, tolerance, tol.CONTAIN_RADIUS)
+            for k, name in enumerate(INTERVAL_NAMES):
+                proof.intervals[name] += int((c.status == k).sum())
+            for f in c.failures:
+                proof.between.append({"clip": clip.name, **f})
+            proof.continuous_seconds += _time.perf_counter() - tc
     proof.seconds = _time.perf_counter() - t0
     _describe(proof, asset, subframes)
     return proof
@@ -348,30 +251,87 @@ def prove(asset, subframes: int = 0, chunk_frames: int | None = None, clips=None
 
 def merge_proofs(asset, proofs, subframes: int = 0) -> Proof:
     """Combine proofs of disjoint clip sets of ``asset`` (from ``prove(..., clips=...)``) into the
-    proof :func:`prove` gives for all of them: results in the asset's clip order, ``tightest``
-    the elementwise maximum, counts and seconds summed."""
+    proof :func:`prove` gives for all of them: results and interval failures in the asset's clip
+    order, tight bounds the elementwise maximum, counts and seconds summed."""
     order = {c.name: i for i, c in enumerate(asset.clips)}
-    out = Proof(tightest=np.zeros(len(asset.part_joints)), tolerance=tol.CONTAIN_RELATIVE * asset.model_size)
+    P = len(asset.part_joints)
+    cont = all(p.continuous for p in proofs) if proofs else True
+    out = Proof(tight_lo=np.zeros(P), tight_hi=np.zeros(P), tolerance=tol.CONTAIN_RELATIVE * asset.model_size,
+                continuous=cont, subframes=subframes)
     for p in proofs:
         out.results.extend(p.results)
-        out.tightest = np.maximum(out.tightest, p.tightest)
+        out.between.extend(p.between)
+        out.tight_lo = np.maximum(out.tight_lo, p.tight_lo)
+        out.tight_hi = np.maximum(out.tight_hi, p.tight_hi)
         out.frames += p.frames
         out.subframe_times += p.subframe_times
         out.vertex_frames += p.vertex_frames
+        out.skinned_vertex_frames += p.skinned_vertex_frames
+        for k in TIER_NAMES:
+            out.tiers[k] += p.tiers[k]
+        for k in INTERVAL_NAMES:
+            out.intervals[k] += p.intervals[k]
+        out.clip_ranges.update(p.clip_ranges)
         out.seconds += p.seconds
+        out.continuous_seconds += p.continuous_seconds
     out.results.sort(key=lambda r: (order.get(r.clip, len(order)), r.part))
+    out.between.sort(key=lambda f: (order.get(f["clip"], len(order)), f["interval"], f["part"]))
     _describe(out, asset, subframes)
+    return out
+
+
+def tightest(asset, proof: Proof, slack_ratio: float) -> np.ndarray:
+    """(P,) the largest joint-space distance of each part's farthest skinned vertex over every
+    checked time, exact for every part that might be slack (radius > ``slack_ratio`` x it): the
+    bound tiers give only a lower bound (the exactly skinned times) and an upper bound, so a
+    part whose lower bound leaves room for slack is skinned exactly at every checked time here.
+    The same for a whole proof and a merged per-clip one (it runs after the merge)."""
+    if proof._tightest is not None:
+        return proof._tightest
+    r = np.asarray(asset.part_radii, dtype=np.float64)
+    out = proof.tight_lo.copy()
+    need = ~(r <= slack_ratio * proof.tight_lo)
+    if need.any():
+        rig = asset.rig
+        exact = np.zeros(len(r), bool)
+        exact[need] = True
+        out[need] = 0.0
+        for clip in asset.clips:
+            if len(clip.times) == 0:
+                continue
+            times = clip_times(clip.times, proof.subframes)[0]
+            for lo in range(0, len(times), tol.CHUNK_FRAMES):
+                skel = asset.skel_transforms(asset.anim_local(clip, times[lo:lo + tol.CHUNK_FRAMES]))
+                s = C.sampled(rig, skel, 0.0, 0.0, exact=np.broadcast_to(exact, (len(skel), len(r))))
+                scale = s.spheres[..., 3] / np.where(r > 0, r, 1.0)[None]
+                out[need] = np.maximum(out[need], np.max(s.dist[:, need] / scale[:, need], axis=0))
+    proof._tightest = out
     return out
 
 
 def _describe(proof, asset, subframes):
     names = ", ".join(f"{c.name} ({len(c.times)})" for c in asset.clips)
-    proof.checked = [f"every vertex of every part on all {proof.frames} frames of every clip: {names}"]
+    t = proof.tiers
+    proof.checked = [f"every vertex of every part on all {proof.frames} frames of every clip: {names}",
+                     f"(part, time) pairs settled by test K {t['K']}, by test D {t['D']}, by exact skinning {t['exact']}"]
+    proof.not_checked = []
     if subframes:
         proof.checked.append(f"{subframes} in-between time(s) per frame interval ({proof.subframe_times} times)")
-        proof.not_checked = ["times between the checked in-between times (motion is a curve; "
-                             "raise --subframes to sample it more finely)"]
+    if proof.continuous:
+        n = proof.intervals
+        how = (f"(part, interval) pairs: chord bound {n['chord']}, per-vertex chord {n['vertex_chord']}, "
+               f"subdivided {n['subdivided']}")
+        if not proof.between and not n["not_checked"]:
+            proof.checked.append("certified for every time in [first, last] of every clip, as UsdSkel interpolates "
+                                 f"(lerp translations and scales, slerp rotations); {how}")
+        else:
+            bad = sorted({(f["clip"], f["part"]) for f in proof.between})
+            proof.checked.append(f"every time between frames, as UsdSkel interpolates: {how}; "
+                                 f"{len(proof.between)} interval(s) NOT certified"
+                                 + (f" (first: clip {bad[0][0]!r} part {bad[0][1]})" if bad else ""))
+            if n["not_checked"]:
+                proof.not_checked.append(f"{n['not_checked']} (part, interval) pairs next to a failing frame")
     else:
-        proof.not_checked = ["in-between times (motion between frames is a curve); use --subframes K"]
+        proof.not_checked = ["in-between times (motion between frames is a curve); the continuous certificate is off"]
     proof.checked.append("triangles between the vertices (a sphere is convex: holding a triangle's corners holds it)")
     return proof

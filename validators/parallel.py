@@ -37,7 +37,7 @@ from .runner import _crash_report, check_asset
 SPLIT_BYTES = 64 * 2**20
 
 #: Rules that read the frame proof: splitting only pays when one of them is selected.
-PROOF_RULES = ("COL403", "COL404")
+PROOF_RULES = ("COL403", "COL404", "COL407")
 
 
 # ------------------------------------------------------------------------------ work units
@@ -66,7 +66,8 @@ def unit_clip(path, clip, kw):
     from .asset import LoadedAsset, open_stage
     from .frameproof import prove
     asset = LoadedAsset(open_stage(path), path)
-    return prove(asset, subframes=kw.get("subframes", 0), chunk_frames=kw.get("chunk_frames"), clips=[clip])
+    return prove(asset, subframes=kw.get("subframes", 0), chunk_frames=kw.get("chunk_frames"), clips=[clip],
+                 continuous=kw.get("continuous", True))
 
 
 def unit_finish(path, kw, proofs):
@@ -187,7 +188,8 @@ def comparable(reports) -> list:
         d = json.loads(json.dumps(r.to_dict(), default=lambda o: o.item() if hasattr(o, "item") else str(o)))
         for k in TIMING_KEYS:
             d["stats"].pop(k, None)
-        d["stats"].get("frameproof", {}).pop("seconds", None)
+        for k in ("seconds", "continuous_seconds"):
+            d["stats"].get("frameproof", {}).pop(k, None)
         out.append(d)
     return out
 

@@ -19,6 +19,7 @@ from .registry import RuleSelector, get_rule
 DEFAULT_OPTIONS = {
     "max_influences": tol.MAX_INFLUENCES,
     "subframes": 0,
+    "continuous": True,
     "slack_ratio": tol.SLACK_RATIO,
     "chunk_frames": None,
     "clip_proofs": None,
@@ -48,6 +49,7 @@ class Context:
         self.asset = asset
         self.max_influences = int(opts["max_influences"])
         self.subframes = int(opts["subframes"])
+        self.continuous = bool(opts["continuous"])
         self.slack_ratio = float(opts["slack_ratio"])
         self.chunk_frames = opts["chunk_frames"]
         self.clip_proofs = opts["clip_proofs"]
@@ -62,7 +64,8 @@ class Context:
             if self.clip_proofs is not None:
                 self._proof = merge_proofs(self.asset, self.clip_proofs, subframes=self.subframes)
             else:
-                self._proof = prove(self.asset, subframes=self.subframes, chunk_frames=self.chunk_frames)
+                self._proof = prove(self.asset, subframes=self.subframes, chunk_frames=self.chunk_frames,
+                                    continuous=self.continuous)
         return self._proof
 
 
@@ -91,8 +94,9 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
     severities : dict, optional
         ``code -> "error" | "warning" | "info"`` overrides.
     **options
-        ``max_influences`` (4), ``subframes`` (0), ``slack_ratio`` (1.5), ``chunk_frames`` (auto),
-        ``max_deviation`` (None; ``"0.02"`` stage units or ``"1%"`` of the model size: COL701).
+        ``max_influences`` (4), ``subframes`` (0), ``continuous`` (True: certify every time between
+        frames), ``slack_ratio`` (1.5), ``chunk_frames`` (auto), ``max_deviation`` (None; ``"0.02"``
+        stage units or ``"1%"`` of the model size: COL701).
 
     Returns
     -------
@@ -187,7 +191,7 @@ def _stats(asset, ctx, t_load, t_total) -> dict:
     else:
         ok, why = asset.ready("proof")
         s["frameproof"] = {"checked": [], "not_checked": [
-            "the frame proof did not run: " + (why if not ok else "COL403/COL404 not selected")]}
+            "the frame proof did not run: " + (why if not ok else "COL403/COL404/COL407 not selected")]}
     return s
 
 

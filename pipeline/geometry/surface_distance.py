@@ -40,7 +40,7 @@ Kernels (private, ``_``-prefixed; readable references in ``tests/naive.py``)
 ``_piece_bounds``: for (pose, piece) pairs, the smaller of the two bounds above;
 ``_all_triangle_bounds``: the same for every source triangle on every pose of a chunk (each
 vertex's distance to its home triangle computed once per pose).  Ericson's
-closest point on a triangle is the runtime's (:mod:`runtime.kernels`), the one copy of it.
+closest point on a triangle is the runtime's (:mod:`runtime.kernels.query`), the one copy of it.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ import numpy as np
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
-from runtime.kernels import _closest_on_triangle
+from runtime.kernels.query import _closest_on_triangle
 
 #: Pairs per task of the parallel kernels (the scratch buffer is allocated once per task).
 BLOCK = 512

@@ -42,7 +42,8 @@ the proxy's parts, spheres and the every-frame proof are made exactly as for any
    weights of the whole (possibly large) cluster.
 
 4. Deviation (:func:`deviation`): on the bind pose and every frame of every clip, both meshes are
-   skinned (:func:`pipeline.stages.spheres.skin_points`, once per pose for both directions) and
+   skinned (:func:`runtime.kernels.skin.skin_frames`, the one skinning kernel, once per pose for
+   both directions) and
    the two-sided distance between the skinned surfaces is bounded from above by
    :func:`pipeline.geometry.surface_distance.deviation_bound` (a Lipschitz bound and a convexity
    bound per piece, pieces subdivided where they are more than ``DEVIATION_REFINE`` above the
@@ -65,6 +66,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from runtime.kernels.skin import skin_frames
+
 from ..errors import UsageError
 from ..geometry.collapse import apply_collapses, vertex_quadrics
 from ..geometry.surface_distance import deviation_bound, nearest_on_candidates
@@ -74,7 +77,6 @@ from ..tolerances import (DEVIATION_MAX_DEPTH, DEVIATION_PAD, DEVIATION_REFINE, 
 from . import StageReport
 from .bind import limit_influences
 from .orient import orient
-from .spheres import skin_points
 
 #: Candidate triangles per sample: of the dense full mesh (proxy -> full, the weight transfer) ...
 FULL_CANDIDATES = 16
@@ -245,8 +247,8 @@ def deviation(full: SkinnedMesh, proxy: SkinnedMesh, poses: Poses | None = None,
         cache["a"] = np.empty((F, full.vertex_count, 3), np.float32)
         cache["b"] = np.empty((F, proxy.vertex_count, 3), np.float32)
         for ch in _chunks(F, nv):
-            cache["a"][ch] = skin_points(full.positions, full.joint_indices, full.joint_weights, poses.mats[ch])
-            cache["b"][ch] = skin_points(proxy.positions, proxy.joint_indices, proxy.joint_weights, poses.mats[ch])
+            cache["a"][ch] = skin_frames(full.positions, full.joint_indices, full.joint_weights, poses.mats[ch])
+            cache["b"][ch] = skin_frames(proxy.positions, proxy.joint_indices, proxy.joint_weights, poses.mats[ch])
 
     def frames(idx):
         if cache:
@@ -254,8 +256,8 @@ def deviation(full: SkinnedMesh, proxy: SkinnedMesh, poses: Poses | None = None,
                 return cache["a"][idx[0]:idx[-1] + 1], cache["b"][idx[0]:idx[-1] + 1]
             return cache["a"][idx], cache["b"][idx]
         m = poses.mats[idx]
-        return (skin_points(full.positions, full.joint_indices, full.joint_weights, m),
-                skin_points(proxy.positions, proxy.joint_indices, proxy.joint_weights, m))
+        return (skin_frames(full.positions, full.joint_indices, full.joint_weights, m),
+                skin_frames(proxy.positions, proxy.joint_indices, proxy.joint_weights, m))
 
     pad = DEVIATION_PAD * size
     a, b = deviation_bound(frames, F, full.triangles, proxy.triangles, refine, DEVIATION_RESOLUTION * size,

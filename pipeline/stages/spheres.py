@@ -6,14 +6,24 @@ triangles) in the bind pose and on every frame of every clip, expressed in joint
     q[f, v] = sum_k w[v, k] * inv(S_j(f)) @ S_{i_k}(f) @ inv(B_{i_k}) @ geom_bind @ p[v]
 
 with ``S = skel_transforms(clip.local, parents)`` (``S = bind_transforms`` for the bind pose).
-The points of one part over all poses are skinned by a numba kernel into a ``(F, nv, 3)``
-float32 array (one part at a time), and the sphere is their exact minimal enclosing sphere
-(:func:`pipeline.geometry.min_sphere`), padded by
-``SPHERE_PAD_RELATIVE * model size + SPHERE_PAD_RADIUS * radius``.
+The points of one part over all poses are skinned by the project's one skinning kernel
+(:mod:`runtime.kernels.skin`) into a ``(F, nv, 3)`` float32 array (one part at a time), and the
+sphere is their exact minimal enclosing sphere (:func:`pipeline.geometry.min_sphere`).
 
 After the centre is rounded to float32, the radius is re-derived from the float64 distance of the
-float64 skinned points (recomputed by a second kernel, not the float32 copies) to that centre, so
-containment holds exactly for the stored values before the pad is added.
+float64 skinned points (:func:`runtime.kernels.skin.part_farthest`, not the float32 copies) to
+that centre, so containment holds exactly at every sampled pose.
+
+**Between frames.**  The asset's guarantee covers every time in ``[first, last]`` of every clip as
+UsdSkel interpolates it, which ``colossus validate`` certifies with
+:func:`runtime.certify.continuous`.  The same certificate runs here on the clips exactly as the
+writer will store them (translations and rotations float32, scales float16) in ``growth`` mode:
+wherever it cannot hold an interval to the minimal radius it subdivides, down to 2^6 sub-steps,
+and the part's radius becomes the largest bound it reached (``growth`` in the report; 0 for most
+parts).  The validator's adaptive subdivision stops at or before every node this one stopped at
+(its radius is at least the bound there), so the written spheres pass it.  Finally the radius is
+padded by ``SPHERE_PAD_RELATIVE * model size + SPHERE_PAD_RADIUS * radius`` and rounded up to
+float32.
 
 ``slack_ratio`` compares the sphere with the tightest possible per-pose sphere: the radius over the
 largest per-pose minimal sphere radius of the part's points, computed exactly on the bind pose and
@@ -25,122 +35,22 @@ shape a lot in its joint's space (it is skinned to several joints that move apar
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
 
 from pipeline.geometry.minsphere import min_sphere, min_spheres
 from pipeline.model import SkinnedMesh, Parts, skel_transforms
 from pipeline.stages import StageReport
 from pipeline.tolerances import SPHERE_PAD_RADIUS, SPHERE_PAD_RELATIVE, model_scale
+from pipeline.xforms import decompose_trs
+from runtime import certify
+from runtime.asset import ClipData
+from runtime.kernels import skin as SK
+from runtime.schema import part_vertex_csr
 
 #: ``slack_ratio`` uses exact per-pose minimal spheres on the bind pose and on at most this many
 #: evenly spaced frames of each clip (first and last included): enough to characterise the slack,
 #: and it keeps the per-pose work bounded on long clips.  The containing sphere itself always
 #: covers every frame.
 SLACK_FRAMES_PER_CLIP = 32
-
-
-@njit(cache=True, inline="always")
-def _skin_one(pos, jidx, w, mats, f, v):
-    """Skinned position of vertex ``v`` in pose ``f`` (float64)."""
-    x = np.float64(pos[v, 0])
-    y = np.float64(pos[v, 1])
-    z = np.float64(pos[v, 2])
-    ax = 0.0
-    ay = 0.0
-    az = 0.0
-    for c in range(jidx.shape[1]):
-        wt = np.float64(w[v, c])
-        if wt == 0.0:
-            continue
-        j = jidx[v, c]
-        ax += wt * (mats[f, j, 0, 0] * x + mats[f, j, 0, 1] * y + mats[f, j, 0, 2] * z + mats[f, j, 0, 3])
-        ay += wt * (mats[f, j, 1, 0] * x + mats[f, j, 1, 1] * y + mats[f, j, 1, 2] * z + mats[f, j, 1, 3])
-        az += wt * (mats[f, j, 2, 0] * x + mats[f, j, 2, 1] * y + mats[f, j, 2, 2] * z + mats[f, j, 2, 3])
-    return ax, ay, az
-
-
-@njit(cache=True)
-def _skin_frame(pos, jidx, w, mats, f, out):
-    for v in range(pos.shape[0]):
-        out[f, v, 0], out[f, v, 1], out[f, v, 2] = _skin_one(pos, jidx, w, mats, f, v)
-
-
-@njit(cache=True)
-def _frame_max_d2(pos, jidx, w, mats, f, cx, cy, cz):
-    best = 0.0
-    for v in range(pos.shape[0]):
-        ax, ay, az = _skin_one(pos, jidx, w, mats, f, v)
-        d = (ax - cx) ** 2 + (ay - cy) ** 2 + (az - cz) ** 2
-        if d > best:
-            best = d
-    return best
-
-
-@njit(parallel=True, cache=True)
-def _skin_points(pos, jidx, w, mats, out):
-    """Linear-blend skinning of ``pos`` (n, 3) float32 for every pose.
-
-    ``jidx`` (n, k) int32, ``w`` (n, k) float32, ``mats`` (F, b, 3, 4) float64 per-pose skinning
-    matrices (already including the change to the target space), ``out`` (F, n, 3) float32.
-    """
-    for f in prange(mats.shape[0]):
-        _skin_frame(pos, jidx, w, mats, f, out)
-
-
-@njit(parallel=True, cache=True)
-def _max_distance(pos, jidx, w, mats, cx, cy, cz):
-    """Largest float64 distance from ``(cx, cy, cz)`` to a skinned point over every pose
-    (same arguments as :func:`_skin_points`, nothing stored)."""
-    F = mats.shape[0]
-    best = np.zeros(F)
-    for f in prange(F):
-        best[f] = _frame_max_d2(pos, jidx, w, mats, f, cx, cy, cz)
-    return np.sqrt(best.max())
-
-
-def _check_skin_args(positions, joint_indices, joint_weights, mats):
-    pos = np.ascontiguousarray(positions, dtype=np.float32)
-    ji = np.ascontiguousarray(joint_indices, dtype=np.int32)
-    jw = np.ascontiguousarray(joint_weights, dtype=np.float32)
-    mats = np.ascontiguousarray(mats, dtype=np.float64)
-    n = len(pos)
-    if pos.ndim != 2 or pos.shape[1] != 3:
-        raise ValueError(f"skin positions: expected shape (n, 3), got {pos.shape}")
-    if ji.ndim != 2 or ji.shape[0] != n or jw.shape != ji.shape:
-        raise ValueError(f"skin joint_indices/joint_weights: expected shape ({n}, k) each, got {ji.shape} and {jw.shape}")
-    if mats.ndim != 4 or mats.shape[2:] != (3, 4):
-        raise ValueError(f"skin matrices: expected shape (F, b, 3, 4), got {mats.shape}")
-    b = mats.shape[1]
-    bad = ((ji < 0) | (ji >= b)) & (jw != 0)
-    if bad.any():
-        raise ValueError(f"skin joint_indices: expected values in [0, {b}) where weight != 0, got {ji[bad][0]}")
-    ji = np.where((ji < 0) | (ji >= b), 0, ji).astype(np.int32)  # zero-weight padding only
-    return pos, ji, jw, mats
-
-
-def skin_points(positions: np.ndarray, joint_indices: np.ndarray, joint_weights: np.ndarray,
-                mats: np.ndarray) -> np.ndarray:
-    """Linear-blend skinning for every pose (numba; reference: :func:`pipeline.model.skin_points`).
-
-    Parameters
-    ----------
-    positions : (n, 3) float32
-    joint_indices : (n, k) int
-    joint_weights : (n, k) float32
-    mats : (F, b, 3, 4) or (F, b, 4, 4) float64
-        Per-pose matrix of each joint, applied to homogeneous positions, e.g.
-        ``skel @ inv(bind) @ geom_bind`` (skeleton space) or ``inv(skel[j]) @ skel @ inv(bind) @
-        geom_bind`` (joint ``j``'s space).
-
-    Returns
-    -------
-    (F, n, 3) float32
-    """
-    mats = np.asarray(mats, dtype=np.float64)[..., :3, :]
-    pos, ji, jw, mats = _check_skin_args(positions, joint_indices, joint_weights, mats)
-    out = np.empty((mats.shape[0], len(pos), 3), np.float32)
-    _skin_points(pos, ji, jw, mats, out)
-    return out
 
 
 def pose_transforms(mesh: SkinnedMesh) -> tuple[np.ndarray, list]:
@@ -167,6 +77,20 @@ def slack_pose_indices(mesh: SkinnedMesh, per_clip: int = SLACK_FRAMES_PER_CLIP)
     return np.concatenate(idx)
 
 
+#: Subdivision depth of the growth run (the validator allows more: runtime.certify.MAX_DEPTH).
+GROWTH_DEPTH = 6
+
+
+def written_clip(clip, joint_count: int) -> ClipData:
+    """A pipeline clip as :class:`runtime.asset.ClipData`, rounded as ``stages.write`` stores it
+    (``decompose_trs``; translations and rotations float32, scales float16)."""
+    t, q, s = decompose_trs(clip.local)
+    times = np.asarray(clip.times, dtype=np.float64)
+    f64 = (lambda a, dt: np.ascontiguousarray(np.asarray(a, dtype=dt).astype(np.float64)))
+    return ClipData(clip.name, clip.name, times, f64(t, np.float32), times, f64(q, np.float32), times,
+                    f64(s, np.float16), np.arange(joint_count, dtype=np.int64), times)
+
+
 def _round_up_f32(x: float) -> np.float32:
     r = np.float32(x)
     if float(r) < x:
@@ -175,7 +99,7 @@ def _round_up_f32(x: float) -> np.float32:
 
 
 def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
-    """Bounding sphere of each part in its joint's space, valid in every pose.
+    """Bounding sphere of each part in its joint's space, valid in every pose and between frames.
 
     Parameters
     ----------
@@ -185,10 +109,11 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     -------
     (SkinnedMesh, StageReport)
         ``parts`` with float32 ``centers`` and ``radii``.  Report counts: ``parts``,
-        ``max_radius``, ``max_slack_ratio``, ``poses``, ``slack_poses``, ``pad``; details:
-        ``parts`` (a list of ``{"part", "joint", "radius", "center", "slack_ratio",
-        "tight_radius", "vertices"}``), ``slack_poses`` (labels of the poses the tight radius was
-        computed on) and ``slack_note``.
+        ``max_radius``, ``max_slack_ratio``, ``poses``, ``slack_poses``, ``pad``, ``grown`` (parts
+        grown for the times between frames), ``max_growth``; details: ``parts`` (a list of
+        ``{"part", "joint", "radius", "center", "slack_ratio", "tight_radius", "vertices",
+        "growth"}``, growth in joint-space units), ``slack_poses`` (labels of the poses the tight
+        radius was computed on) and ``slack_note``.
     """
     if mesh.parts is None:
         raise ValueError("spheres: expected a mesh with parts (run the parts stage first), got parts=None")
@@ -199,40 +124,42 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     G = mesh.geom_bind
     rest = mesh.positions.astype(np.float64) @ G[:3, :3].T + G[:3, 3]
     abs_pad = SPHERE_PAD_RELATIVE * model_scale(rest)
-    _, ji_all, jw_all, _ = _check_skin_args(mesh.positions, mesh.joint_indices, mesh.joint_weights,
-                                            to_skel[:1, :, :3, :])
+    pos_all, ji_all, jw_all = SK.check_skin_inputs(mesh.positions, mesh.joint_indices, mesh.joint_weights,
+                                                   mesh.joint_count)
 
     slack_idx = slack_pose_indices(mesh)
     P = len(parts_in)
     centers = np.zeros((P, 3), np.float32)
-    radii = np.zeros(P, np.float32)
+    r_min = np.zeros(P)
+    pose_far = np.zeros((len(S), P))  # joint-space farthest vertex at each pose (exact, float64)
     details = []
     for p in range(P):
         j = int(parts_in.joints[p])
         verts = np.unique(mesh.triangles[parts_in.part_faces(p)].ravel())
-        pos, ji, jw = mesh.positions[verts], ji_all[verts], jw_all[verts]
-        mats = np.ascontiguousarray((inv_S[:, j, None] @ to_skel)[:, :, :3, :])
-        pts = np.empty((len(S), len(verts), 3), np.float32)
-        _skin_points(pos, ji, jw, mats, pts)
+        pos, ji, jw = pos_all[verts], ji_all[verts], jw_all[verts]
+        mats = SK.fold(inv_S[:, j, None] @ to_skel)
+        pts = SK.skin_frames(pos, ji, jw, mats)
         center, r = min_sphere(pts.reshape(-1, 3))
         _, frame_r = min_spheres(pts if len(slack_idx) == len(S) else pts[slack_idx])
         del pts
         c32 = center.astype(np.float32)
         c64 = c32.astype(np.float64)
-        dmax = _max_distance(pos, ji, jw, mats, c64[0], c64[1], c64[2])
-        radius = max(r, dmax) + abs_pad + SPHERE_PAD_RADIUS * r
-        r32 = _round_up_f32(radius)
-        centers[p], radii[p] = c32, r32
+        d, _ = SK.part_farthest(pos, ji, jw, mats, [0, len(verts)], np.arange(len(verts)),
+                                np.broadcast_to(c64, (len(S), 1, 3)))
+        pose_far[:, p] = d[:, 0]
+        centers[p], r_min[p] = c32, max(r, float(d.max()))
         tight = float(frame_r.max())
-        details.append({
-            "part": p,
-            "joint": mesh.joint_names[j],
-            "radius": float(r32),
-            "center": [float(x) for x in c32],
-            "tight_radius": tight,
-            "slack_ratio": float(r32) / tight if tight > 0 else None,
-            "vertices": int(len(verts)),
-        })
+        details.append({"part": p, "joint": mesh.joint_names[j], "tight_radius": tight, "vertices": int(len(verts))})
+
+    growth = _growth(mesh, parts_in, centers, r_min, pose_far)
+    radii = np.zeros(P, np.float32)
+    for p in range(P):
+        need = r_min[p] + growth[p]
+        radii[p] = _round_up_f32(need + abs_pad + SPHERE_PAD_RADIUS * need)
+        tight = details[p]["tight_radius"]
+        details[p].update({"radius": float(radii[p]), "center": [float(x) for x in centers[p]],
+                           "slack_ratio": float(radii[p]) / tight if tight > 0 else None,
+                           "growth": float(growth[p])})
 
     slacks = [d["slack_ratio"] for d in details if d["slack_ratio"] is not None]
     report = StageReport("spheres")
@@ -243,6 +170,8 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
         "poses": len(S),
         "slack_poses": int(len(slack_idx)),
         "pad": float(abs_pad),
+        "grown": int((growth > 0).sum()),
+        "max_growth": float(growth.max()) if P else 0.0,
     }
     report.details = {
         "parts": details,
@@ -252,3 +181,28 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     }
     new_parts = Parts(parts_in.joints, parts_in.face_offsets, parts_in.faces, centers, radii)
     return mesh.replace(parts=new_parts), report
+
+
+def _growth(mesh, parts_in, centers, r_min, pose_far) -> np.ndarray:
+    """(P,) how much each part's radius must grow beyond ``r_min`` for the continuous certificate
+    (:func:`runtime.certify.continuous` in growth mode, on the clips as written)."""
+    P = len(parts_in)
+    growth = np.zeros(P)
+    if not mesh.clips or P == 0:
+        return growth
+    voff, verts = part_vertex_csr(mesh.triangles, parts_in.face_offsets, parts_in.faces, mesh.vertex_count)
+    rig = certify.Rig(mesh.positions, mesh.joint_indices, mesh.joint_weights, mesh.geom_bind, mesh.bind_transforms,
+                      mesh.rest_transforms, mesh.parents, np.asarray(parts_in.joints), centers.astype(np.float64),
+                      r_min, voff, verts)
+    start = 1  # pose 0 is the bind pose
+    for clip in mesh.clips:
+        n = clip.frame_count
+        far = pose_far[start:start + n]
+        start += n
+        if n < 2:
+            continue
+        c = certify.continuous(rig, written_clip(clip, mesh.joint_count), clip.times, far, np.ones_like(far, bool),
+                               0.0, 0.0, rho=r_min, growth=True, max_depth=GROWTH_DEPTH, frame_bound_space="joint")
+        need = np.max(np.where(np.isfinite(c.bound), c.bound, 0.0), axis=0)
+        growth = np.maximum(growth, need - r_min)
+    return np.maximum(growth, 0.0)

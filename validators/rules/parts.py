@@ -77,12 +77,42 @@ def slack_sphere(asset, ctx):
     Why: an oversized sphere makes the broad phase useless: its triangles are tested on every query.
     Example: every radius multiplied by 3 "to be safe"."""
     proof = ctx.proof()
-    for p, (r, t) in enumerate(zip(asset.part_radii, proof.tightest)):
+    for p, (r, t) in enumerate(zip(asset.part_radii, fp.tightest(asset, proof, ctx.slack_ratio))):
         ratio = float(r / t) if t > 0 else float("inf")
         if ratio > ctx.slack_ratio:
             yield hit(f"part {p} (joint {asset.part_joints[p]!r}): radius {r:.4g} is {ratio:.2f}x the tightest "
                       f"radius {t:.4g} that holds on all checked frames", part=p, joint=asset.part_joints[p],
                       ratio=ratio, sort_key=ratio)
+
+
+@rule("COL407", "holds-between-frames", "error",
+      "At every time between consecutive frames of every clip, as UsdSkel interpolates the joints, every skinned "
+      "vertex of every part lies inside the part's moving sphere.", needs=("proof",))
+def holds_between_frames(asset, ctx):
+    """What: the continuous certificate (`runtime.certify.continuous`).  For every clip and every
+    interval between consecutive frames, under UsdSkel's interpolation (translations and scales
+    lerped, rotations slerped along the shortest arc), a sound bound on how far each vertex strays
+    from the chord between its positions at the two frames proves the vertex stays inside its
+    part's sphere; where the bound is too loose the interval is halved (up to 256 sub-steps) and
+    the ends skinned exactly.  One finding per (clip, part, interval) that is not certified:
+    `interval` [t0, t1], the worst time found in it, part, joint, vertex and excess (sampled at 16
+    sub-steps), or, when no sub-step fails but the bound still cannot decide, the bound's excess.
+    Intervals next to a frame that fails COL403 are left to COL403.
+    Why: a game samples animation at its own rate (60 Hz over 30 fps clips, blended, time-scaled):
+    in-between poses are what it queries; a vertex outside its sphere there is a missed hit.
+    Example: spheres fitted to the frames only, on a clip whose joints swing far between frames."""
+    proof = ctx.proof()
+    for f in proof.between:
+        p = f["part"]
+        joint = asset.part_joints[p]
+        what = (f"vertex {f['vertex']} is {f['excess']:.4g} outside its sphere at time {f['time']:g} "
+                f"({f['excess'] / f['radius']:.2%} of the radius)" if f["definite"] else
+                f"the bound cannot certify it (up to {f['bound']:.4g} from the centre in joint space; "
+                f"worst sampled excess {f['excess']:.4g} at time {f['time']:g})")
+        yield hit(f"clip {f['clip']!r} between times {f['t0']:g} and {f['t1']:g}: part {p} (joint {joint!r}) "
+                  f"{what}", clip=f["clip"], interval=[f["t0"], f["t1"]], time=f["time"], part=p, joint=joint,
+                  vertex=f["vertex"], excess=f["excess"], fraction=f["excess"] / f["radius"],
+                  sort_key=f["excess"] if f["definite"] else f["bound"])
 
 
 @rule("COL405", "sphere-values", "error", "Sphere centres are finite and radii positive and finite.", needs=("parts",))

@@ -154,3 +154,16 @@ def weights_sorted(asset, ctx):
     if len(bad):
         yield hit(f"{len(bad)} vertices have weights not sorted strongest first, first vertex {int(bad[0])}",
                   vertex=int(bad[0]), count=len(bad))
+
+
+@rule("COL311", "no-blend-shapes", "error",
+      "The collision mesh binds no UsdSkel blend shapes (the proof and the runtime skin without them).",
+      needs=("mesh_raw",))
+def no_blend_shapes(asset, ctx):
+    """What: the mesh has no `skel:blendShapes` attribute values and no `skel:blendShapeTargets`.
+    Why: blend shapes move vertices before skinning; the frame proof, the continuous certificate
+    and the runtime model linear blend skinning only, so their spheres and points would not be
+    those UsdSkel shows.  The asset is refused rather than proved wrong.
+    Example: a face mesh with `skel:blendShapes = ["smile"]` bound to `/Rig/Shapes/smile`."""
+    if asset.blend_shapes:
+        yield hit(f"the mesh has UsdSkel blend shapes: {asset.blend_shapes}", prim=str(asset.mesh.GetPath()))

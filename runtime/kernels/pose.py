@@ -1,0 +1,243 @@
+"""Joint transforms at any time, as UsdSkel computes them (``UsdSkelAnimQuery`` +
+``UsdSkelSkeletonQuery``), and composition of any joint-local pose.
+
+Conventions (:mod:`runtime.schema`): matrices are **column-vector** ``(4, 4) float64``
+(``p' = M @ p``, translation in the last column); quaternions are ``(x, y, z, w)``.
+
+UsdSkel's interpolation between time samples (``pxr/usd/usd/interpolators.h``): translations and
+scales are lerped, rotations are ``GfSlerp``-ed; outside the sampled range the first / last
+sample is held.  Scales are ``half3``: ``GfLerp`` on them rounds every operation to half
+precision (:func:`_half`), so an in-between scale is within ``3 x 2^-11`` (relative) of the exact
+lerp; the continuous certificate charges that (:func:`runtime.certify.factor_bounds`).  ``GfSlerp`` takes the **shortest arc** (it negates ``q1`` when ``q0 . q1 < 0``)
+and falls back to a linear blend when ``1 - |q0 . q1| <= 1e-5``; :func:`_slerp` does the same and
+normalises (the renormalisation matters on the linear branch only).  The shortest-arc behaviour is
+checked against usd-core in ``tests/test_kernels.py``.  A joint-local matrix is ``T R S`` (scale,
+then rotate, then translate: ``UsdSkelMakeTransform``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .config import FASTMATH_PROOF as _FM
+
+
+@njit(cache=True, inline="always")
+def _bracket(times, t):
+    """Sample index ``i`` and weight ``a`` so the value at ``t`` is ``lerp(v[i], v[i+1], a)``;
+    held (clamped) outside the sampled range, exact on a sample (``a == 0``)."""
+    n = times.shape[0]
+    if n == 1 or t <= times[0]:
+        return 0, 0.0
+    if t >= times[n - 1]:
+        return n - 1, 0.0
+    i = np.searchsorted(times, t, side="right") - 1
+    a = (t - times[i]) / (times[i + 1] - times[i])
+    return i, a
+
+
+@njit(cache=True, inline="always")
+def _half(x):
+    """``x`` rounded to the nearest IEEE half (ties to even), as ``GfHalf`` stores it (normal
+    range; UsdSkel's scales are ``half3``)."""
+    if x == 0.0 or not math.isfinite(x):
+        return x
+    m, e = math.frexp(x)
+    q = math.ldexp(1.0, max(e, -13) - 11)  # the half's quantum at this magnitude (subnormals below 2^-14)
+    return np.rint(x / q) * q
+
+
+@njit(cache=True, inline="always")
+def _slerp(q0x, q0y, q0z, q0w, q1x, q1y, q1z, q1w, a):
+    """GfSlerp of two (x, y, z, w) quaternions (shortest arc, linear when nearly parallel),
+    normalised; returns four float64."""
+    cos_t = q0x * q1x + q0y * q1y + q0z * q1z + q0w * q1w
+    sign = 1.0
+    if cos_t < 0.0:
+        cos_t = -cos_t
+        sign = -1.0
+    if 1.0 - cos_t > 0.00001:
+        theta = math.acos(min(cos_t, 1.0))
+        s = math.sin(theta)
+        s0 = math.sin((1.0 - a) * theta) / s
+        s1 = math.sin(a * theta) / s
+    else:
+        s0 = 1.0 - a
+        s1 = a
+    s1 *= sign
+    x = s0 * q0x + s1 * q1x
+    y = s0 * q0y + s1 * q1y
+    z = s0 * q0z + s1 * q1z
+    w = s0 * q0w + s1 * q1w
+    n2 = x * x + y * y + z * z + w * w
+    if n2 > 0.0:
+        n = math.sqrt(n2)
+        x /= n
+        y /= n
+        z /= n
+        w /= n
+    return x, y, z, w
+
+
+@njit(cache=True, inline="always")
+def _trs_matrix(tx, ty, tz, x, y, z, w, sx, sy, sz, m):
+    """m (4, 4) = T R S, column-vector (``GfMatrix4d::SetRotate(quat)`` transposed, columns
+    scaled)."""
+    m[0, 0] = (1.0 - 2.0 * (y * y + z * z)) * sx
+    m[1, 0] = (2.0 * (x * y + z * w)) * sx
+    m[2, 0] = (2.0 * (z * x - y * w)) * sx
+    m[0, 1] = (2.0 * (x * y - z * w)) * sy
+    m[1, 1] = (1.0 - 2.0 * (z * z + x * x)) * sy
+    m[2, 1] = (2.0 * (y * z + x * w)) * sy
+    m[0, 2] = (2.0 * (z * x + y * w)) * sz
+    m[1, 2] = (2.0 * (y * z - x * w)) * sz
+    m[2, 2] = (1.0 - 2.0 * (x * x + y * y)) * sz
+    m[0, 3] = tx
+    m[1, 3] = ty
+    m[2, 3] = tz
+    m[3, 0] = 0.0
+    m[3, 1] = 0.0
+    m[3, 2] = 0.0
+    m[3, 3] = 1.0
+
+
+@njit(cache=True)
+def _trs_at(t, tt, vt, tr, vr, ts, vs, out_t, out_q, out_s):
+    """Translations (A, 3), rotations (A, 4) and scales (A, 3) of the animated joints at time
+    code ``t``, interpolated as UsdSkel does."""
+    iT, aT = _bracket(tt, t)
+    iR, aR = _bracket(tr, t)
+    iS, aS = _bracket(ts, t)
+    for k in range(out_t.shape[0]):
+        for c in range(3):
+            if aT == 0.0:
+                out_t[k, c] = vt[iT, k, c]
+            else:
+                out_t[k, c] = (1.0 - aT) * vt[iT, k, c] + aT * vt[iT + 1, k, c]
+            if aS == 0.0:
+                out_s[k, c] = vs[iS, k, c]
+            else:  # GfLerp on GfVec3h: every operation rounds to half
+                out_s[k, c] = _half(_half((1.0 - aS) * vs[iS, k, c]) + _half(aS * vs[iS + 1, k, c]))
+        if aR == 0.0:
+            for c in range(4):
+                out_q[k, c] = vr[iR, k, c]
+        else:
+            x, y, z, w = _slerp(vr[iR, k, 0], vr[iR, k, 1], vr[iR, k, 2], vr[iR, k, 3],
+                                vr[iR + 1, k, 0], vr[iR + 1, k, 1], vr[iR + 1, k, 2], vr[iR + 1, k, 3], aR)
+            out_q[k, 0] = x
+            out_q[k, 1] = y
+            out_q[k, 2] = z
+            out_q[k, 3] = w
+
+
+@njit(cache=True)
+def _locals_at(t, tt, vt, tr, vr, ts, vs, anim_to_skel, rest_local, local):
+    """local (J, 4, 4) = the clip's joint-local transforms at time code ``t`` (joints the clip
+    does not animate keep ``rest_local``)."""
+    local[:] = rest_local
+    A = anim_to_skel.shape[0]
+    tv = np.empty((A, 3))
+    qv = np.empty((A, 4))
+    sv = np.empty((A, 3))
+    _trs_at(t, tt, vt, tr, vr, ts, vs, tv, qv, sv)
+    for k in range(A):
+        _trs_matrix(tv[k, 0], tv[k, 1], tv[k, 2], qv[k, 0], qv[k, 1], qv[k, 2], qv[k, 3],
+                    sv[k, 0], sv[k, 1], sv[k, 2], local[anim_to_skel[k]])
+
+
+@njit(cache=True, inline="always")
+def _mul44(a, b, out):
+    """out = a @ b for 4x4 (no allocation; ``out`` must not alias ``a`` or ``b``)."""
+    for i in range(4):
+        a0, a1, a2, a3 = a[i, 0], a[i, 1], a[i, 2], a[i, 3]
+        for k in range(4):
+            out[i, k] = a0 * b[0, k] + a1 * b[1, k] + a2 * b[2, k] + a3 * b[3, k]
+
+
+@njit(cache=True, fastmath=_FM)
+def _compose(local, parents, topo_order, inv_bind, geom_bind, local_to_world, skel_out, skin_out,
+             world_out, folded):
+    """Compose joint-local transforms (J, 4, 4) into
+
+    skel_out (J, 4, 4): skeleton space (``ComputeJointSkelTransforms``);
+    skin_out (J, 4, 4): ``skel @ inv_bind @ geom_bind`` (mesh -> skeleton space, UsdSkel's
+      skinning transform with the geomBindTransform folded in);
+    world_out (J, 4, 4): ``local_to_world @ skel`` (joint -> stage space);
+    folded (1, J, 12): ``local_to_world @ skin`` in :func:`runtime.kernels.skin.fold` layout.
+    """
+    J = local.shape[0]
+    tmp = np.empty((4, 4))
+    for n in range(J):
+        j = topo_order[n]
+        p = parents[j]
+        if p < 0:
+            skel_out[j] = local[j]
+        else:
+            _mul44(skel_out[p], local[j], skel_out[j])
+        _mul44(skel_out[j], inv_bind[j], tmp)
+        _mul44(tmp, geom_bind, skin_out[j])
+        _mul44(local_to_world, skel_out[j], world_out[j])
+        for r in range(3):
+            for c in range(4):
+                folded[0, j, 4 * r + c] = (local_to_world[r, 0] * skin_out[j, 0, c] + local_to_world[r, 1] * skin_out[j, 1, c]
+                                           + local_to_world[r, 2] * skin_out[j, 2, c] + local_to_world[r, 3] * skin_out[j, 3, c])
+
+
+# ------------------------------------------------------------------------ public wrappers
+def locals_at(clip, times, rest_local) -> np.ndarray:
+    """(T, J, 4, 4) float64 joint-local transforms of ``clip`` (a :class:`runtime.asset.ClipData`)
+    at time codes ``times`` (T,), interpolated as UsdSkel does."""
+    rest = np.ascontiguousarray(rest_local, dtype=np.float64)
+    times = np.atleast_1d(np.asarray(times, dtype=np.float64))
+    out = np.empty((len(times),) + rest.shape)
+    for i, t in enumerate(times):
+        _locals_at(float(t), clip.tt, clip.vt, clip.tr, clip.vr, clip.ts, clip.vs, clip.anim_to_skel, rest, out[i])
+    return out
+
+
+def trs_at(clip, times):
+    """Translations (T, A, 3), rotations (T, A, 4) (x, y, z, w) and scales (T, A, 3) of the
+    clip's animated joints at ``times``, interpolated as UsdSkel does."""
+    times = np.atleast_1d(np.asarray(times, dtype=np.float64))
+    A = len(clip.anim_to_skel)
+    t = np.empty((len(times), A, 3))
+    q = np.empty((len(times), A, 4))
+    s = np.empty((len(times), A, 3))
+    for i, x in enumerate(times):
+        _trs_at(float(x), clip.tt, clip.vt, clip.tr, clip.vr, clip.ts, clip.vs, t[i], q[i], s[i])
+    return t, q, s
+
+
+def compose(local, parents, topo_order=None) -> np.ndarray:
+    """(..., J, 4, 4) joint-local -> skeleton-space transforms (numpy; parents first)."""
+    local = np.asarray(local, dtype=np.float64)
+    parents = np.asarray(parents)
+    order = range(len(parents)) if topo_order is None else topo_order
+    out = np.empty_like(local)
+    for j in order:
+        p = parents[j]
+        out[..., j, :, :] = local[..., j, :, :] if p < 0 else out[..., p, :, :] @ local[..., j, :, :]
+    return out
+
+
+@njit(cache=True)
+def _trs_matrices(t, q, s, out):
+    """out (J, 4, 4) = T R S of translations (J, 3), unit quaternions (J, 4) (x, y, z, w) and
+    scales (J, 3)."""
+    for j in range(t.shape[0]):
+        _trs_matrix(t[j, 0], t[j, 1], t[j, 2], q[j, 0], q[j, 1], q[j, 2], q[j, 3], s[j, 0], s[j, 1], s[j, 2], out[j])
+
+
+def trs_matrices(translations, rotations, scales) -> np.ndarray:
+    """(J, 4, 4) column-vector ``T R S`` from translations (J, 3), rotations (J, 4) ``(x, y, z,
+    w)`` (normalised here) and scales (J, 3); the formula UsdSkel uses."""
+    t = np.ascontiguousarray(translations, dtype=np.float64)
+    q = np.asarray(rotations, dtype=np.float64)
+    q = np.ascontiguousarray(q / np.linalg.norm(q, axis=-1, keepdims=True))
+    s = np.ascontiguousarray(scales, dtype=np.float64)
+    out = np.empty((len(t), 4, 4))
+    _trs_matrices(t, q, s, out)
+    return out

@@ -1,0 +1,291 @@
+"""The one skinning kernel, UsdSkel's interpolation and the sound bounds (runtime.kernels,
+runtime.certify), against readable numpy references (tests/naive.py) and usd-core."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pxr import Gf, Usd, UsdSkel, Vt
+from scipy.spatial.transform import Rotation
+
+import naive
+from runtime import certify as C
+from runtime.asset import ClipData
+from runtime.kernels import bounds as B
+from runtime.kernels import pose as PK
+from runtime.kernels import skin as SK
+
+
+def _random_skin(rng, n=300, J=6, k=4, F=5):
+    pts = rng.normal(size=(n, 3)).astype(np.float32)
+    ji = rng.integers(0, J, size=(n, k)).astype(np.int32)
+    jw = rng.random((n, k)).astype(np.float32)
+    jw[:, -1] = 0
+    jw /= jw.sum(1, keepdims=True)
+    ji[:, -1] = 99  # padding: a zero weight may name any joint
+    m = np.repeat(np.eye(4)[None, None], F, 0).repeat(J, 1)
+    m[..., :3, :3] += 0.3 * rng.normal(size=(F, J, 3, 3))
+    m[..., :3, 3] = rng.normal(size=(F, J, 3))
+    return pts, ji, jw, m
+
+
+# -- skin --------------------------------------------------------------------------------------
+@pytest.mark.parametrize("n", [50, 9000])  # serial and parallel kernels
+def test_skin_frames_matches_naive_lbs(n):
+    rng = np.random.default_rng(1)
+    pts, ji, jw, m = _random_skin(rng, n=n)
+    got = SK.skin_frames(pts, ji, jw, m)
+    ref = naive.naive_lbs(pts, ji, jw, m)
+    assert got.dtype == np.float32 and got.shape == ref.shape
+    np.testing.assert_allclose(got, ref, atol=2e-5)
+
+
+def test_part_farthest_matches_naive_lbs_and_todo():
+    rng = np.random.default_rng(2)
+    pts, ji, jw, m = _random_skin(rng)
+    poff = np.array([0, 10, 10, 200])
+    pv = rng.choice(len(pts), size=200, replace=True).astype(np.int32)
+    centers = rng.normal(size=(m.shape[0], 3, 3))
+    todo = rng.random((m.shape[0], 3)) < 0.6
+    d, v = SK.part_farthest(pts, ji, jw, m, poff, pv, centers, todo=todo)
+    sk = naive.naive_lbs(pts, ji, jw, m)
+    for f in range(m.shape[0]):
+        for p in range(3):
+            verts = pv[poff[p]:poff[p + 1]]
+            if not todo[f, p]:
+                assert np.isnan(d[f, p]) and v[f, p] == -1
+            elif len(verts) == 0:
+                assert d[f, p] == 0 and v[f, p] == -1
+            else:
+                dist = np.linalg.norm(sk[f, verts] - centers[f, p], axis=1)
+                assert d[f, p] == pytest.approx(dist.max(), abs=1e-9)
+                assert v[f, p] in verts[dist == dist.max()]
+
+
+def test_skin_inputs_one_padding_policy():
+    rng = np.random.default_rng(3)
+    pts, ji, jw, m = _random_skin(rng)
+    with pytest.raises(ValueError, match="joint_weights"):
+        SK.skin_frames(pts, ji, jw[:, :2], m)
+    bad = ji.copy()
+    bad[0, 0] = 99  # a non-zero weight on a joint that does not exist
+    with pytest.raises(ValueError, match="joint_indices"):
+        SK.skin_frames(pts, bad, jw, m)
+    nan = pts.copy()
+    nan[3] = np.nan
+    d, v = SK.part_farthest(nan, ji, jw, m[:1], [0, 10], np.arange(10), np.zeros((1, 1, 3)))
+    assert np.isinf(d[0, 0]) and v[0, 0] == 3  # a NaN point reads as infinitely far
+
+
+# -- pose: UsdSkel's interpolation -----------------------------------------------------------
+def _usd_clip(q0, q1, t0=(0, 0, 0), t1=(1, 2, 3), s0=(1, 1, 1), s1=(2, 1, 0.5)):
+    stage = Usd.Stage.CreateInMemory()
+    anim = UsdSkel.Animation.Define(stage, "/A")
+    anim.CreateJointsAttr(["a"])
+    for tc, q, t, s in ((0.0, q0, t0, s0), (1.0, q1, t1, s1)):
+        anim.CreateRotationsAttr().Set(Vt.QuatfArray([Gf.Quatf(float(q[3]), *map(float, q[:3]))]), tc)
+        anim.CreateTranslationsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*t)]), tc)
+        anim.CreateScalesAttr().Set(Vt.Vec3hArray([Gf.Vec3h(*s)]), tc)
+    cache = UsdSkel.Cache()
+    return stage, cache, cache.GetAnimQuery(anim)
+
+
+def test_interpolation_matches_usdskel_shortest_arc():
+    """GfSlerp takes the shortest arc: with q0 . q1 < 0 it negates q1; the runtime's port does too."""
+    rng = np.random.default_rng(4)
+    for trial in range(6):
+        q0 = Rotation.random(random_state=trial).as_quat()
+        q1 = Rotation.random(random_state=100 + trial).as_quat()
+        if np.dot(q0, q1) > 0:
+            q1 = -q1  # force the negative dot product
+        if trial == 5:
+            q1 = -(q0 + 1e-4 * rng.normal(size=4))  # the nearly parallel (linear) branch
+            q1 /= np.linalg.norm(q1)
+        stage, cache, query = _usd_clip(q0, q1)
+        clip = ClipData("A", "/A", np.array([0.0, 1.0]), np.array([[[0, 0, 0]], [[1, 2, 3]]], float),
+                        np.array([0.0, 1.0]), np.array([[q0], [q1]]).astype(np.float32).astype(float),
+                        np.array([0.0, 1.0]), np.array([[[1, 1, 1]], [[2, 1, 0.5]]], float),
+                        np.array([0]), np.array([0.0, 1.0]))
+        for a in (0.0, 0.25, 0.5, 0.9):
+            ours = PK.locals_at(clip, [a], np.eye(4)[None])[0, 0]
+            ref = np.array(query.ComputeJointLocalTransforms(Usd.TimeCode(a))[0]).T  # row -> column vector
+            np.testing.assert_allclose(ours, ref, atol=2e-6)
+            qa = naive.slerp(clip.vr[0, 0], clip.vr[1, 0], a)
+            h = np.float16  # UsdSkel lerps half3 scales in half precision
+            sa = [float(h(h((1 - a) * s0) + h(a * s1))) for s0, s1 in zip((1, 1, 1), (2, 1, 0.5))]
+            want = naive.trs([[a, 2 * a, 3 * a]], qa[None], [sa])[0]
+            np.testing.assert_allclose(ours, want, atol=1e-5)
+
+
+def test_trs_matrices_match_naive():
+    rng = np.random.default_rng(5)
+    t, q, s = rng.normal(size=(7, 3)), Rotation.random(7, random_state=5).as_quat(), rng.uniform(0.5, 2, (7, 3))
+    np.testing.assert_allclose(PK.trs_matrices(t, q, s), naive.trs(t, q, s), atol=1e-12)
+
+
+# -- bounds: soundness against dense brute force ----------------------------------------------
+def random_rig(rng, J=6, n=400, F=6, angle=0.8, scale=False, tight=True):
+    """A random joint tree, random points skinned to 1-4 nearby joints, one part per joint
+    (strongest joint), a clip of F frames of random rotations (up to ``angle`` rad per frame),
+    translations and (``scale``) non-uniform scales; spheres fitted to the frames only."""
+    parents = np.array([-1] + [int(rng.integers(0, j)) for j in range(1, J)])
+    rest_t = rng.normal(size=(J, 3))
+    rest_t[0] = 0
+    rest = naive.trs(rest_t, np.tile([0, 0, 0, 1.0], (J, 1)), np.ones((J, 3)))
+    bind = naive.compose(rest, parents)
+    pts = (bind[rng.integers(0, J, n), :3, 3] + 0.4 * rng.normal(size=(n, 3))).astype(np.float32)
+    d = np.linalg.norm(pts[:, None] - bind[None, :, :3, 3], axis=2)
+    ji = np.argsort(d, 1)[:, :4].astype(np.int32)
+    w = np.exp(-np.take_along_axis(d, ji, 1) ** 2) * (rng.random((n, 4)) < 0.8)
+    w[:, 0] += 1e-3
+    jw = (w / w.sum(1, keepdims=True)).astype(np.float32)
+    owner = ji[:, 0]
+    order = np.argsort(owner, kind="stable")
+    voff = np.searchsorted(owner[order], np.arange(J + 1))
+    times = np.arange(F, dtype=float)
+    rots = Rotation.random(J, random_state=int(rng.integers(1 << 30)))
+    q = np.empty((F, J, 4))
+    cur = Rotation.identity(J)
+    for f in range(F):
+        q[f] = cur.as_quat()
+        cur = Rotation.from_rotvec(rng.normal(size=(J, 3)) * angle / 2) * cur
+    del rots
+    t = rest_t[None] + 0.2 * rng.normal(size=(F, J, 3))
+    # animated uniform scales (non-uniform ones make the certificate conservative: see continuous())
+    s = np.ones((F, J, 3)) if not scale else np.repeat(rng.uniform(0.8, 1.25, size=(F, J, 1)), 3, 2).astype(np.float16).astype(float)
+    clip = ClipData("c", "/c", times, t, times, q.astype(np.float32).astype(float), times, s, np.arange(J), times)
+    skel = naive.compose(naive.trs(t, clip.vr, s), parents)
+    y = naive.naive_lbs(pts, ji, jw, skel @ np.linalg.inv(bind))
+    centers = np.zeros((J, 3))
+    radii = np.zeros(J)
+    for p in range(J):
+        vs = order[voff[p]:voff[p + 1]]
+        loc = np.einsum("fij,fvj->fvi", np.linalg.inv(skel[:, p]), np.concatenate([y[:, vs], np.ones((F, len(vs), 1))], 2))[..., :3]
+        lo, hi = loc.reshape(-1, 3).min(0), loc.reshape(-1, 3).max(0)
+        centers[p] = (lo + hi) / 2 + (0.3 * rng.normal(size=3) if tight else 0)
+        radii[p] = np.linalg.norm(loc - centers[p], axis=2).max() * (1 + (0 if tight else 0.3))
+    rig = C.Rig(pts, ji, jw, np.eye(4), bind, rest, parents, np.arange(J), centers, radii, voff, order)
+    return rig, clip, skel
+
+
+def _dense(rig, clip, t0, t1, steps=64):
+    """Stage distances of every part's farthest vertex minus its radius at ``steps`` sub-steps
+    (naive: scipy-free slerp, T R S, LBS by definition)."""
+    out = []
+    for a in np.linspace(0, 1, steps + 1)[1:-1]:
+        tt = t0 + a * (t1 - t0)
+        i = int(np.floor(tt))
+        f = tt - i
+        q = naive.slerp(clip.vr[i], clip.vr[i + 1], f)
+        t = (1 - f) * clip.vt[i] + f * clip.vt[i + 1]
+        s = _half_lerp(clip.vs[i], clip.vs[i + 1], f)
+        skel = naive.compose(naive.trs(t, q, s)[None], rig.parents)[0]
+        y = naive.naive_lbs(rig.points, rig.joint_indices, rig.joint_weights, (skel @ rig.inv_bind)[None])[0]
+        ex = np.zeros(rig.P)
+        for p in range(rig.P):
+            vs = rig.verts[rig.vert_offsets[p]:rig.vert_offsets[p + 1]]
+            N = skel[rig.part_joint[p]]
+            c = N[:3, :3] @ rig.part_centers[p] + N[:3, 3]
+            R = rig.part_radii[p] * np.linalg.norm(N[:3, :3], axis=0).max()
+            ex[p] = (np.linalg.norm(y[vs] - c, axis=1).max() - R) / R if len(vs) else -1
+        out.append(ex)
+    return np.array(out)  # (steps - 1, P) relative excess
+
+
+@pytest.mark.parametrize("seed,scale", [(0, False), (1, False), (2, True), (3, False), (4, True)])
+def test_continuous_certificate_is_sound_against_dense_brute_force(seed, scale):
+    rng = np.random.default_rng(seed)
+    rig, clip, skel = random_rig(rng, scale=scale, tight=seed % 2 == 0 and not scale)
+    # relative tolerance 1e-6: above float32 quaternion noise (1e-7), below the validator's 1e-5
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    ok = ~(s.bound > s.spheres[..., 3] * (1 + 1e-6))
+    c = C.continuous(rig, clip, clip.times, s.bound, ok, 0.0, 1e-6)
+    certified = c.status <= 2
+    failed = c.status == 3
+    seen_fail = False
+    for i in range(len(clip.times) - 1):
+        ex = _dense(rig, clip, clip.times[i], clip.times[i + 1]).max(0)
+        assert not (certified[i] & (ex > 1e-6)).any(), (i, ex[certified[i]])  # never a false certificate
+        seen_fail |= bool((ex > 1e-3).any())
+    for f in c.failures:  # a reported failure is real: at its time its vertex is outside
+        if f["definite"]:
+            d = _dense_at(rig, clip, f["time"], f["part"], f["vertex"])
+            assert d == pytest.approx(f["excess"], abs=1e-6 * f["radius"]) and d > 0
+    assert c.status.size and certified.mean() > 0.3  # the bounds are not vacuous
+
+
+def _dense_at(rig, clip, tt, p, v):
+    """Stage distance minus radius of vertex ``v`` of part ``p`` at time ``tt`` (naive)."""
+    i = min(int(np.floor(tt)), len(clip.times) - 2)
+    f = tt - i
+    skel = naive.compose(naive.trs((1 - f) * clip.vt[i] + f * clip.vt[i + 1], naive.slerp(clip.vr[i], clip.vr[i + 1], f),
+                                   _half_lerp(clip.vs[i], clip.vs[i + 1], f))[None], rig.parents)[0]
+    y = naive.naive_lbs(rig.points[v:v + 1], rig.joint_indices[v:v + 1], rig.joint_weights[v:v + 1],
+                        (skel @ rig.inv_bind)[None])[0, 0]
+    N = skel[rig.part_joint[p]]
+    return np.linalg.norm(y - (N[:3, :3] @ rig.part_centers[p] + N[:3, 3])) - \
+        rig.part_radii[p] * np.linalg.norm(N[:3, :3], axis=0).max()
+
+
+def _half_lerp(s0, s1, f):
+    h = np.float16  # UsdSkel lerps half3 scales in half precision
+    return (h(h((1 - f) * s0) + h(f * s1))).astype(np.float64)
+
+
+def test_a_vertex_leaving_only_between_samples_is_caught_with_its_interval():
+    """Two joints; the child swings +0.9 rad then -0.9 rad: the straight pose half-way is outside a
+    sphere fitted to the two frames around a centre below the child's pivot (the tip is 1.368 from
+    it at both frames and 1.5 when straight)."""
+    parents = np.array([-1, 0])
+    rest = naive.trs([[0, 0, 0], [0, 1, 0]], [[0, 0, 0, 1.0]] * 2, np.ones((2, 3)))
+    bind = naive.compose(rest, parents)
+    y = np.linspace(1.0, 2.0, 11)
+    pts = np.c_[np.zeros_like(y), y, np.zeros_like(y)].astype(np.float32)
+    ji = np.c_[np.ones(11, np.int32), np.zeros(11, np.int32)]
+    jw = np.c_[np.ones(11), np.zeros(11)].astype(np.float32)
+    qz = Rotation.from_rotvec([[0, 0, 0.9], [0, 0, -0.9]]).as_quat()
+    times = np.array([0.0, 1.0])
+    clip = ClipData("swing", "/swing", times, np.tile([[[0, 0, 0], [0, 1, 0]]], (2, 1, 1)).astype(float), times,
+                    np.stack([np.tile([0, 0, 0, 1.0], (2, 1)), np.tile([0, 0, 0, 1.0], (2, 1))], 0), times,
+                    np.ones((2, 2, 3)), np.array([0, 1]), times)
+    clip.vr[:, 1] = qz
+    # part 0 belongs to the root joint and holds the child's vertices
+    skel = naive.compose(naive.trs(clip.vt, clip.vr, clip.vs), parents)
+    yk = naive.naive_lbs(pts, ji, jw, skel @ np.linalg.inv(bind))
+    c = np.array([0.0, 0.5, 0.0])
+    r = np.linalg.norm(yk - c, axis=2).max() * (1 + 1e-6)
+    rig = C.Rig(pts, ji, jw, np.eye(4), bind, rest, parents, [0], c[None], [r], [0, 11], np.arange(11))
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    ok = ~(s.bound > s.spheres[..., 3] * (1 + 1e-6))
+    assert ok.all()  # both samples inside
+    res = C.continuous(rig, clip, times, s.bound, ok, 0.0, 1e-6)
+    assert res.status[0, 0] == 3 and len(res.failures) == 1
+    f = res.failures[0]
+    assert (f["t0"], f["t1"]) == (0.0, 1.0) and f["excess"] > 0.05 and 0 <= f["vertex"] < 11
+    assert abs(f["time"] - 0.5) <= 0.1
+
+
+def test_pose_bounds_hold_on_random_poses():
+    """Tests K and D are upper bounds of the farthest skinned vertex (any pose, any weights)."""
+    rng = np.random.default_rng(7)
+    for trial in range(4):
+        rig, clip, skel = random_rig(rng)
+        wild = naive.compose(naive.trs(rng.normal(size=(10, 6, 3)), Rotation.random(60, random_state=trial)
+                                       .as_quat().reshape(10, 6, 4), rng.uniform(0.5, 2, (10, 6, 3))), rig.parents)
+        for poses in (skel, wild):
+            sph, kb, db = B.pose_bounds(poses, rig.bounds)
+            y = naive.naive_lbs(rig.points, rig.joint_indices, rig.joint_weights, poses @ rig.inv_bind)
+            for p in range(rig.P):
+                vs = rig.verts[rig.vert_offsets[p]:rig.vert_offsets[p + 1]]
+                far = np.linalg.norm(y[:, vs] - sph[:, p, None, :3], axis=2).max(1)
+                assert (far <= kb[:, p] * (1 + 1e-9)).all() and (far <= db[:, p] * (1 + 1e-9)).all()
+
+
+def test_pareto_set_keeps_every_maximiser():
+    rng = np.random.default_rng(8)
+    d, w = rng.random(300), rng.random((300, 3)) * (rng.random((300, 3)) < 0.5)
+    keep = B.pareto_set(d, w, limit=10 ** 6)
+    for _ in range(200):
+        e = rng.random(4)
+        val = e[0] * d + w @ e[1:]
+        assert val[keep].max() == pytest.approx(val.max())
