@@ -413,3 +413,59 @@ def test_dense_measurement_every_character(src, proxies, tmp_path):
     if not src.exists():
         pytest.skip(f"{src} is absent (corpus not beside the clone)")
     _dense_check(src, proxies, tmp_path)
+
+
+# ------------------------------------------------------------------------------ summary, inspect, render, README
+def test_readme_proxy_example_is_the_import_output(proxies):
+    """The README's proxy lines and deviation table are what importing the creature prints."""
+    from pipeline.cli_import import proxy_lines
+    from pipeline.stages import StageReport
+
+    summary, _ = proxies(ROOT / "samples" / "creature.glb")
+    simp = summary["stages"]["simplify"]
+    lines = proxy_lines(StageReport("simplify", counts=simp["counts"], details=simp.get("details", {})))
+    readme = (ROOT / "README.md").read_text()
+    block = readme.split("$ colossus import samples/creature.glb -o out/creature_proxy.usda --target-faces 2000\n", 1)[1]
+    block = block.split("```", 1)[0]
+    shown = [ln for ln in block.splitlines() if ln.strip() and ln.strip() != "..." and "simplify " not in ln]
+    assert shown and all(ln in lines for ln in shown), [ln for ln in shown if ln not in lines]
+    stage_line = next(ln for ln in block.splitlines() if ln.strip().startswith("simplify"))
+    assert stage_line.split(None, 2)[2] in f"{simp['counts']['faces_in']} -> {simp['counts']['faces_out']} faces" or \
+        f"{simp['counts']['faces_in']} -> {simp['counts']['faces_out']} faces" in stage_line
+    assert (ROOT / "docs" / "proxy.png").stat().st_size < 300_000 and "](docs/proxy.png)" in readme
+
+
+def test_inspect_shows_the_proxy(proxies):
+    from validators.cli_inspect import inspect_cmd
+
+    summary, prox = proxies(ROOT / "samples" / "creature.glb")
+    c = summary["stages"]["simplify"]["counts"]
+    r = CliRunner().invoke(inspect_cmd, [str(prox)])
+    assert r.exit_code == 0, r.output
+    assert f"faces         {c['faces_out']} (source {c['faces_in']})" in r.stdout
+    assert f"deviation     <= {c['deviation']:.4g}" in r.stdout and f"{c['sampled_deviation']:.4g} measured" in r.stdout
+
+
+def test_render_source_draws_the_full_mesh_behind_the_proxy(tmp_path):
+    from PIL import Image
+
+    from validators.cli_render import render_cmd
+
+    src = ROOT / "samples" / "limb.glb"
+    prox = tmp_path / "limb300.usda"
+    r = CliRunner().invoke(main, ["import", str(src), "-o", str(prox), "--target-faces", "300"])
+    assert r.exit_code == 0, r.output
+    plain, over = tmp_path / "plain.png", tmp_path / "over.png"
+    args = [str(prox), "--clip", "bend", "--time", "6", "--size", "320x240"]
+    assert CliRunner().invoke(render_cmd, args + ["-o", str(plain)]).exit_code == 0
+    r = CliRunner().invoke(render_cmd, args + ["-o", str(over), "--source", str(src)])
+    assert r.exit_code == 0, r.output
+    a = np.asarray(Image.open(plain).convert("RGB"), dtype=np.int32)
+    b = np.asarray(Image.open(over).convert("RGB"), dtype=np.int32)
+    assert a.shape == b.shape == (240, 320, 3)
+    assert np.any(np.abs(a - b) > 24, axis=-1).mean() > 0.01  # the full mesh shows where it is outside
+    # a source whose skeleton is not the asset's: one line, exit 2, nothing written
+    bad = tmp_path / "bad.png"
+    r = CliRunner().invoke(render_cmd, [str(prox), "-o", str(bad), "--source", str(ROOT / "samples" / "creature.glb")])
+    assert r.exit_code == 2 and "does not match" in r.stderr and "Traceback" not in r.output + r.stderr
+    assert not bad.exists()
