@@ -19,7 +19,12 @@ def _stage_line(rep) -> str:
     c = rep.counts
     s = rep.stage
     if s == "read":
-        return f"{c['vertices']} vertices, {c['faces']} triangles, {c['joints']} joints, {c['clips']} clips ({c['frames']} frames) [{c['format']}]"
+        meshes = ""
+        if "skinned_meshes" in c:
+            meshes = f", {c['skinned_meshes']} skinned + {c['rigid_meshes']} rigid meshes"
+        norm = f", {c['weights_normalised']} weight sums normalised" if c.get("weights_normalised") else ""
+        return (f"{c['vertices']} vertices, {c['faces']} triangles, {c['joints']} joints, {c['clips']} clips "
+                f"({c['frames']} frames at {c['time_codes_per_second']:g} fps){meshes}{norm} [{c['format']}]")
     if s == "bake":
         return (f"{c['source_up_axis']}-up {c['source_meters_per_unit']:g} m/unit -> {c['up_axis']}-up "
                 f"{c['meters_per_unit']:g} m/unit (x{c['scale_applied']:g})")
@@ -53,6 +58,7 @@ def format_summary(result) -> str:
     lines.append("")
     lines.append(f"  vertices {s['vertices_in']} in, {s['vertices_out']} out | faces flipped {s['faces_flipped']} | "
                  f"influences dropped {s['influences_dropped']} | parts {s['parts']} | clips {s['clips']} | frames {s['frames']}")
+    lines += _source_lines(next(r for r in result.reports if r.stage == "read"))
     sph = next(r for r in result.reports if r.stage == "spheres")
     parts = sph.details.get("parts", [])
     if parts:
@@ -96,6 +102,28 @@ def proxy_lines(rep) -> list:
         out.append("  (deviation: upper bound of the two-sided distance between the proxy and the full skinned mesh, "
                    "stage units; measured: the largest distance found between them)")
     return out
+def _source_lines(read_rep) -> list:
+    """Per mesh (skinned or rigid, vertices) and per clip (source keys, sampling, frames, error
+    bound where keys fall between frames) of the read stage."""
+    d = read_rep.details or {}
+    lines = []
+    from .run import mesh_provenance
+    meshes = mesh_provenance(d.get("meshes") or [])
+    if meshes:
+        lines += ["", f"  {'mesh':<28} {'kind':<8} {'vertices':>8}  bound to"]
+        for name, m in meshes.items():
+            lines.append(f"  {str(name)[:28]:<28} {m['kind']:<8} {m['vertices']:>8}  {m.get('joint', '(its skin)')}")
+    wn = d.get("weights_normalised") or {}
+    if wn.get("vertices"):
+        lines.append(f"  {wn['vertices']} vertices had weights not summing to 1 (sums {wn['min_sum']:g}..{wn['max_sum']:g}): normalised")
+    clips = d.get("clips") or []
+    if clips:
+        lines += ["", f"  {'clip':<24} {'keys':>5} {'frames':>6}  sampling"]
+        for c in clips:
+            bound = (f"; off-grid error <= {c['error_bound_relative']:.2g} x size"
+                     if "error_bound_relative" in c else "")
+            lines.append(f"  {str(c['name'])[:24]:<24} {c['source_keys']:>5} {c['frames']:>6}  {c['sampling']}{bound}")
+    return lines
 
 
 @click.command("import", context_settings={"help_option_names": ["-h", "--help"]})
@@ -118,7 +146,7 @@ def proxy_lines(rep) -> list:
 @click.option("--mesh", "meshes", multiple=True, metavar="NAME",
               help="Mesh to import (repeatable); default every mesh skinned to the skeleton, merged.")
 @click.option("--fps", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="Frame rate of the output time codes; default the source's own.")
+              help="Frame rate of the output grid; default the source's own when its keys sit on one, else 30.")
 @click.option("--source-up-axis", type=click.Choice(["Y", "Z"], case_sensitive=False), default=None,
               help="Override the up axis the reader assumes for the source.")
 @click.option("--source-meters-per-unit", type=click.FloatRange(min=0, min_open=True), default=None,

@@ -21,8 +21,8 @@ from .stages.parts import parts
 from .stages.simplify import parse_max_deviation, simplify
 from .stages.spheres import spheres
 from .stages.weld import weld
-from .stages.write import check_output_path, write
-from .tolerances import PARTS_ANY_THRESHOLD
+from .stages.write import check_output_path, stored_clips, write
+from .tolerances import PARTS_ANY_THRESHOLD, RESAMPLING_RELATIVE
 
 STAGES = ("read", "bake", "weld", "orient", "bind", "simplify", "parts", "spheres", "write")
 #: Stages that run only when asked for.
@@ -122,19 +122,18 @@ def proxy_provenance(report) -> dict:
     return out
 
 
-def settings_from_provenance(provenance) -> ImportSettings:
-    """The :class:`ImportSettings` an asset was made with, from its provenance's ``settings``
-    (``""`` stands for None there); unknown keys are ignored."""
-    from dataclasses import fields
-
-    given = dict((provenance or {}).get("settings") or {})
-    kw = {}
-    for f in fields(ImportSettings):
-        v = given.get(f.name)
-        if v in (None, ""):
-            continue
-        kw[f.name] = list(v) if f.name == "meshes" else v
-    return ImportSettings(**kw)
+def mesh_provenance(info: list) -> dict:
+    """``{mesh name: {"kind": "skinned" | "rigid", "vertices": n[, "joint": name]}}`` for the
+    asset's provenance (primitives of one mesh added up)."""
+    out = {}
+    for x in info:
+        d = out.setdefault(x["name"], {"kind": x["kind"], "vertices": 0})
+        d["vertices"] += int(x["vertices"])
+        if x["kind"] != d["kind"]:
+            d["kind"] = "skinned and rigid"
+        if x.get("joint"):
+            d["joint"] = x["joint"]
+    return out
 
 
 def sha256_of(path) -> str:
@@ -143,6 +142,58 @@ def sha256_of(path) -> str:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
+
+
+def read_warnings(m: SkinnedMesh) -> list:
+    """The reader's findings worth a warning line: its notes, morph targets not carried, clips
+    whose resampling off the source's keys errs more than the tolerance, no clip at all."""
+    out = list(m.source.get("notes", []))
+    morph = m.source.get("morph_meshes") or {}
+    if morph:
+        out.append(f"morph targets / shape keys are not carried into the collider (it follows the skeleton only): "
+                   + ", ".join(f"{k} ({v})" for k, v in morph.items()))
+    for c in m.source.get("clip_info", []):
+        if c.get("error_bound_relative", 0.0) > RESAMPLING_RELATIVE:
+            out.append(f"clip {c['name']!r}: its keys fall between the {c['fps']:g} fps frames and resampling "
+                       f"moves vertices up to {c['error_bound_relative']:.2g} x the model size "
+                       f"(more than {RESAMPLING_RELATIVE:g}); import with --fps at the source's rate")
+    if not m.clips:
+        out.append("the file has no animation clip; spheres hold for the bind pose only")
+    return out
+
+
+def settings_from_provenance(settings: dict) -> ImportSettings:
+    """The :class:`ImportSettings` an asset was made with, from its provenance ``settings``
+    dictionary (empty strings stand for None; the mesh list was stored comma-separated)."""
+    base = asdict(ImportSettings())
+    out = {}
+    for k, default in base.items():
+        if k not in settings:
+            continue
+        v = settings[k]
+        if k == "meshes":
+            out[k] = [m for m in str(v).split(", ") if m] if not isinstance(v, (list, tuple)) else list(v)
+        elif v == "" or v is None:
+            out[k] = None if default is None else default
+        elif isinstance(default, float) or k in ("fps", "source_meters_per_unit"):
+            out[k] = float(v)
+        elif isinstance(default, int):
+            out[k] = int(v)
+        else:
+            out[k] = v
+    return ImportSettings(**out)
+
+
+def read_baked(src, settings: ImportSettings | None = None) -> SkinnedMesh:
+    """The source read and baked into the output convention exactly as ``import`` does (before
+    welding and rounding): what ``colossus validate --source`` compares an asset with."""
+    s = settings or ImportSettings()
+    s.check()
+    m = read(src, meshes=s.meshes or None, fps=s.fps)
+    if s.source_up_axis or s.source_meters_per_unit:
+        m = m.replace(up_axis=s.source_up_axis or m.up_axis,
+                      meters_per_unit=s.source_meters_per_unit or m.meters_per_unit)
+    return bake(m, s.up_axis, s.meters_per_unit)[0]
 
 
 def build_collider(src, settings: ImportSettings | None = None, progress=None, stop_after: str | None = None):
@@ -176,13 +227,19 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None, s
         m = m.replace(source={**m.source, "path": os.fspath(src)})
         if m.face_count == 0:
             raise InputError(src, "the skinned mesh has no faces")
+        info = m.source.get("mesh_info", [])
         rep = StageReport("read", counts={
             "vertices": m.vertex_count, "faces": m.face_count, "joints": m.joint_count,
             "clips": len(m.clips), "frames": sum(c.frame_count for c in m.clips),
             "format": m.source.get("format"), "meshes": len(m.source.get("meshes", [])),
-            "time_codes_per_second": m.time_codes_per_second})
-        if not m.clips:
-            rep.warnings.append("the file has no animation clip; spheres hold for the bind pose only")
+            "skinned_meshes": sum(1 for x in info if x["kind"] == "skinned"),
+            "rigid_meshes": sum(1 for x in info if x["kind"] == "rigid"),
+            "weights_normalised": (m.source.get("weights_normalised") or {}).get("vertices", 0),
+            "time_codes_per_second": m.time_codes_per_second},
+            details={"clips": m.source.get("clip_info", []), "meshes": info,
+                     "weights_normalised": m.source.get("weights_normalised", {}),
+                     "meshes_left_out": m.source.get("meshes_left_out", [])})
+        rep.warnings.extend(read_warnings(m))
         return m, rep
 
     mesh = step("read", do_read)
@@ -195,7 +252,8 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None, s
     if s.proxy:
         mesh = step("simplify", lambda: simplify(mesh, s.target_faces, s.max_deviation, s.max_influences))
     mesh = step("parts", lambda: parts(mesh, s.parts, s.min_part_faces, s.parts_threshold))
-    mesh = step("spheres", lambda: spheres(mesh))
+    # on the clips as the asset stores them (half-precision scales), so the spheres hold for it
+    mesh = step("spheres", lambda: spheres(stored_clips(mesh)))
     return mesh, reports
 
 
@@ -220,6 +278,7 @@ def import_asset(src, out, settings: ImportSettings | None = None, progress=None
         "importer": f"colossus {__version__}", "reader": mesh.source.get("reader", ""),
         "sourceFrame": mesh.source.get("frame", ""),
         "settings": {k: ("" if v is None else v) for k, v in asdict(s).items()},
+        "meshes": mesh_provenance(mesh.source.get("mesh_info", [])),
     }
     simp = next((r for r in reports if r.stage == "simplify"), None)
     if simp is not None:

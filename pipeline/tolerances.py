@@ -23,6 +23,12 @@ SPHERE_PAD_RELATIVE = 1e-5
 SPHERE_PAD_RADIUS = 1e-6
 #: Weights must sum to 1 within this after ``bind``.
 WEIGHT_SUM = 1e-5
+#: A source key this close to a frame (in frames) is on the frame grid.
+GRID_KEY_FRAMES = 1e-3
+#: A source vertex whose weights sum this far from 1 (absolute) is counted as renormalised.
+SOURCE_WEIGHT_SUM = 1e-3
+#: A clip resampled off its keys must stay this close to the source (times the model size).
+RESAMPLING_RELATIVE = 1e-3
 #: Cap on what one input may make the importer allocate: bytes per byte of input file ...
 ALLOC_FACTOR = 400
 #: ... plus this many bytes, so that tiny files still import.

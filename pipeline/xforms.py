@@ -66,12 +66,20 @@ def decompose_trs(m: np.ndarray):
     """(..., 4, 4) affine matrices -> (t (..., 3), q (..., 4), s (..., 3)) with ``m = T R S``.
 
     Shear, if any, is dropped (the rotation is the orthonormal polar factor).  A negative
-    determinant becomes a negative x scale.
+    determinant becomes a negative x scale.  Matrices that are exactly ``T R S`` (columns
+    orthogonal) take a fast path (column norms); the others the SVD.
     """
     m = np.asarray(m, dtype=np.float64)
     a = m[..., :3, :3]
-    u, sig, vt = np.linalg.svd(a)
-    rot = u @ vt
+    s = np.linalg.norm(a, axis=-2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rot = a / s[..., None, :]
+    gram = np.swapaxes(rot, -1, -2) @ rot
+    sheared = ~np.all(np.abs(gram - np.eye(3)) <= 1e-10, axis=(-2, -1))
+    if np.any(sheared):
+        u, _, vt = np.linalg.svd(a[sheared])
+        rot = rot.copy()
+        rot[sheared] = u @ vt
     det = np.linalg.det(rot)
     flip = det < 0
     if np.any(flip):

@@ -166,7 +166,7 @@ def sampled(rig: Rig, skel, tol_abs: float, tol_rel: float, exact=None) -> Sampl
 # -------------------------------------------------------------------- continuous time
 def factor_bounds(clip, times, rest_local):
     """Per sample interval and joint: the local transforms at both ends and the bounds the chain
-    recursion (:func:`runtime.kernels.bounds._chain_bounds`) needs.
+    recursion (:func:`runtime.kernels.bounds.chain_bounds`) needs.
 
     For a joint the clip animates, over an interval with ends ``(t0, q0, s0)``, ``(t1, q1, s1)``
     (time normalised to [0, 1]): the translation moves by ``dt = |t1 - t0|`` at constant speed;
@@ -191,8 +191,8 @@ def factor_bounds(clip, times, rest_local):
 
     Returns a dict of (I, J, ...) float64 arrays: L0, L1, Li0, Li1, fw, iv, dt, eps."""
     times = np.asarray(times, dtype=np.float64)
-    L = PK.locals_at(clip, times, rest_local)
-    Li = np.linalg.inv(L)
+    L, t, q, s = PK.locals_at(clip, times, rest_local, trs=True)
+    Li = _inv_affine(L)
     I, J = len(times) - 1, len(rest_local)
     fw = np.zeros((I, J, 3))
     iv = np.zeros((I, J, 3))
@@ -204,7 +204,6 @@ def factor_bounds(clip, times, rest_local):
     fw[:, :, 0] = _norm2(lin)[None]
     iv[:, :, 0] = _norm2(np.linalg.inv(lin))[None]
     if len(clip.anim_to_skel) and I > 0:
-        t, q, s = PK.trs_at(clip, times)
         a = clip.anim_to_skel
         qn = q / np.linalg.norm(q, axis=-1, keepdims=True)
         q0, q1 = qn[:-1], qn[1:]
@@ -213,10 +212,10 @@ def factor_bounds(clip, times, rest_local):
         om = OMEGA_MARGIN * theta
         al = ALPHA_MARGIN * theta ** 2
         sa = np.abs(s)
-        smax = np.maximum(sa[:-1].max(-1), sa[1:].max(-1))
-        smin = np.minimum(sa[:-1].min(-1), sa[1:].min(-1))
-        smin = np.where((np.sign(s[:-1]) != np.sign(s[1:])).any(-1), 0.0, smin)
-        ds = np.abs(s[1:] - s[:-1]).max(-1)
+        smax = np.maximum(_max3(sa[:-1]), _max3(sa[1:]))
+        smin = np.minimum(_min3(sa[:-1]), _min3(sa[1:]))
+        smin = np.where(_max3(np.sign(s[:-1]) != np.sign(s[1:])), 0.0, smin)
+        ds = _max3(np.abs(s[1:] - s[:-1]))
         with np.errstate(divide="ignore", invalid="ignore"):
             inv_s = np.where(smin > 0, 1.0 / smin, np.inf)
         fw[:, a] = np.stack([smax, om * smax + ds, al * smax + 2 * om * ds], -1)
@@ -227,12 +226,39 @@ def factor_bounds(clip, times, rest_local):
         e = np.where(ds > 0, 3.0 * 2.0 ** -11 * smax, 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             ei = np.where(e > 0, e / (smin * (smin - e)), 0.0)
-        iso[:, a] = (np.ptp(s[:-1], axis=-1) == 0) & (np.ptp(s[1:], axis=-1) == 0)  # uniform at both ends
+        iso[:, a] = (_max3(s[:-1]) == _min3(s[:-1])) & (_max3(s[1:]) == _min3(s[1:]))  # uniform at both ends
         eps[:, a, 0] = e
         eps[:, a, 1] = np.where((e > 0) & ~(smin > e), np.inf, ei)
     return dict(L0=np.ascontiguousarray(L[:-1]), L1=np.ascontiguousarray(L[1:]),
                 Li0=np.ascontiguousarray(Li[:-1]), Li1=np.ascontiguousarray(Li[1:]), fw=fw, iv=iv, dt=dt,
                 eps=eps, iso=iso, locals=L)
+
+
+def _max3(x):
+    """Largest of the last axis (length 3): numpy reduces such short axes slowly."""
+    return np.maximum(np.maximum(x[..., 0], x[..., 1]), x[..., 2])
+
+
+def _min3(x):
+    return np.minimum(np.minimum(x[..., 0], x[..., 1]), x[..., 2])
+
+
+def _inv_affine(L):
+    """Inverses of (..., 4, 4) affine matrices (last row 0 0 0 1) by the 3x3 cofactors: a few
+    vectorised operations instead of one LAPACK call per matrix."""
+    m = L[..., :3, :3]
+    c = np.empty_like(m)  # the adjugate (transposed cofactors), row by row
+    c[..., 0, :] = np.cross(m[..., :, 1], m[..., :, 2])
+    c[..., 1, :] = np.cross(m[..., :, 2], m[..., :, 0])
+    c[..., 2, :] = np.cross(m[..., :, 0], m[..., :, 1])
+    det = np.einsum("...i,...i->...", m[..., :, 0], c[..., 0, :])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = c / det[..., None, None]
+    out = np.zeros_like(L)
+    out[..., :3, :3] = inv
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", inv, L[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
 
 
 def _norm2(lin):
@@ -282,7 +308,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
       world transform, N_J is a similarity at each time and the ratio ``s_lo / s_hi`` is exactly 1.
       Non-uniform scales on the path make the certificate conservative (it may then report an
       interval as undecided).
-    * Chord deviation of a ball's copy: ``delta_b`` of :func:`runtime.kernels.bounds._chain_bounds`.
+    * Chord deviation of a ball's copy: ``delta_b`` of :func:`runtime.kernels.bounds.chain_bounds`.
     * Level A1 (continuous test K): ``|y_v(tau) - c| <= a_P max_b (max(e0_b, e1_b) + delta_b +
       lam_b r_b) + eps_P |c_P|`` (the ball's centre is within ``delta_b`` of its chord, whose points
       are within the larger end distance; the ball's points within ``lam_b r_b`` of it).
@@ -292,7 +318,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
       sampled proof's bounds of the farthest vertex at both ends, in J space), so the bound is
       ``max(D0, D1) + min(a_P max_b delta_b, sum_b wmax_b delta_b)``.
     * Level B: the same per vertex, with both ends skinned exactly
-      (:func:`runtime.kernels.bounds._chord_tasks`).
+      (:func:`runtime.kernels.bounds.chord_tasks`).
     * Level C: halve the interval (UsdSkel's interpolation evaluated at the midpoint by the
       runtime's port, :mod:`runtime.kernels.pose`); on a sub-interval of fraction f the
       recursion's velocities scale by f and accelerations by f^2 (the magnitudes bounded on the
@@ -324,7 +350,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     M = len(bd.pj_joint)
     e0, e1, delta, lam, pert = (np.zeros((I, M)) for _ in range(5))
     if M:
-        B._chain_bounds(fac["L0"], fac["L1"], fac["Li0"], fac["Li1"], fac["fw"], fac["iv"], fac["dt"], fac["eps"],
+        B.chain_bounds(fac["L0"], fac["L1"], fac["Li0"], fac["Li1"], fac["fw"], fac["iv"], fac["dt"], fac["eps"],
                         off, pj, pd, bd.pj_center, bd.pj_radius, pair_part, bd.part_centers, e0, e1, delta, lam, pert)
     # scale bounds of N_J over each interval (products along the root path, parents first)
     Jn = len(rig.bind)
@@ -455,13 +481,10 @@ def _refine(rig, clip, times, fac, delta, pert, own, pair_part, todo, out, tol_a
             tb.append(mats.get(b, J))
             tr.append(rows[(i, p)])
             ts.append(frac * frac)
-        n = len(nodes)
-        res = [np.empty(n), np.empty(n, np.int64), np.empty(n), np.empty(n, np.int64), np.empty(n),
-               np.empty(n, np.int64)]
-        B._chord_tasks(rig.points, rig.joint_indices, rig.joint_weights, mats.array(), rig.vert_offsets, rig.verts,
-                       bd.part_centers, np.array(tp, np.int64), np.array(ta, np.int64), np.array(tb, np.int64),
-                       np.array(tr, np.int64), np.array(ts), drow, prow, *res)
-        u, vu, d0, v0, d1, v1 = res
+        u, vu, d0, v0, d1, v1 = B.chord_tasks(
+            rig.points, rig.joint_indices, rig.joint_weights, mats.array(), rig.vert_offsets, rig.verts,
+            bd.part_centers, np.array(tp, np.int64), np.array(ta, np.int64), np.array(tb, np.int64),
+            np.array(tr, np.int64), np.array(ts), drow, prow)
         nxt = []
         for n_, (i, p, a, b, depth) in enumerate(nodes):
             key = (i, p)

@@ -29,8 +29,11 @@ from .errors import ColliderError
 
 #: Above this many rays the parallel ray kernel is used.
 PARALLEL_RAYS = 256
-#: Above this many vertices skinning runs on every core.
-PARALLEL_SKIN = 8_000
+#: Above this many vertices skinning runs on every core (a one-thread pass over fewer costs less
+#: than waking the pool, and the threaded kernel compiles only for colliders this large: the demo
+#: creature, 5,056 vertices, never compiles it).  The runtime benchmark's 20,000-vertex collider
+#: is above it: on 2 quiet cores the threaded pass is 1.3-1.5x the one-thread one.
+PARALLEL_SKIN = 16_000
 #: :meth:`Collider.pose_from_joints` grows a sphere that does not provably hold to the bound's
 #: radius when that is at most this many times the stored radius, else to the farthest skinned
 #: vertex of the part (exact, O(part vertices)).
@@ -265,10 +268,11 @@ class Pose:
     """The collider at one pose: skinned points, part spheres, queries.
 
     Made by :meth:`Collider.pose` (a clip at a time) or :meth:`Collider.pose_from_joints` (any
-    joint-local pose).  Posing is lazy: :meth:`set` computes the joints, the part spheres and
+    joint-local pose).  Posing is lazy: :meth:`set` computes the joints; the part spheres and
     provable culling spheres (tests K and D of :mod:`runtime.kernels.bounds`, no vertex
-    skinned); a query skins only the parts it reaches, and reading :attr:`points` skins the rest
-    (same numbers either way).
+    skinned) are computed when first read (by a query, or :attr:`spheres` / :attr:`cull`), so a
+    program that only reads points never compiles the bounds kernel; a query skins only the
+    parts it reaches, and reading :attr:`points` skins the rest (same numbers either way).
 
     Attributes
     ----------
@@ -294,8 +298,9 @@ class Pose:
         self._points = np.empty((V, 3), dtype=np.float32)
         self._points1 = self._points.reshape(1, V, 3)  # the skinning kernel's (F, V, 3) view
         self._full = -1  # version at which every vertex was skinned
-        self.spheres = np.empty((P, 4))
-        self.cull = np.empty((P, 4))
+        self._spheres = np.empty((P, 4))
+        self._cull = np.empty((P, 4))
+        self._bounded = -1  # version at which spheres and cull were computed
         self.refit = np.zeros(P, dtype=bool)
         self.skel_transforms = np.empty((J, 4, 4))
         self.skinning_transforms = np.empty((J, 4, 4))
@@ -307,6 +312,9 @@ class Pose:
         self._ready = np.zeros(P, dtype=np.int64)  # part p's chunk spheres are valid if == _version
         self._version = 0
         self._local = np.empty((J, 4, 4))
+        self._local1 = self._local.reshape(1, J, 4, 4)  # the interpolation kernel's (T, J, 4, 4) view
+        self._time1 = np.zeros(1)
+        self._trs = {}  # per clip: the interpolation kernel's (1, A, 10) scratch
         self._sph = np.empty((1, P, 4))
         self._kb = np.empty((1, P))
         self._db = np.empty((1, P))
@@ -327,7 +335,11 @@ class Pose:
         if not np.isfinite(time):
             raise ValueError(f"time must be finite, got {time}")
         self._set_world(time)
-        PK._locals_at(time, c.tt, c.vt, c.tr, c.vr, c.ts, c.vs, c.anim_to_skel, d.rest_local, self._local)
+        self._time1[0] = time
+        trs = self._trs.get(c.name)
+        if trs is None:
+            trs = self._trs[c.name] = np.empty((1, len(c.anim_to_skel), 10))
+        PK._locals_at(self._time1, c.tt, c.vt, c.tr, c.vr, c.ts, c.vs, c.anim_to_skel, d.rest_local, self._local1, trs)
         self._posed()
         self.refit[:] = False
         self.clip = c.name if clip is not None else None
@@ -358,13 +370,33 @@ class Pose:
             prim = d.stage.GetPrimAtPath(d.skeleton_path)
             self.local_to_world = schema.matrices_from_usd(UsdGeom.Imageable(prim).ComputeLocalToWorldTransform(time))
 
+    @property
+    def spheres(self) -> np.ndarray:
+        """(P, 4) float64 part sphere centres + radii at this pose (computed on first read)."""
+        self._bounds()
+        return self._spheres
+
+    @property
+    def cull(self) -> np.ndarray:
+        """(P, 4) float64 culling spheres at this pose (computed on first read)."""
+        self._bounds()
+        return self._cull
+
     def _posed(self):
         d = self._data
         PK._compose(self._local, d.parents, d.topo_order, d.inv_bind, d.geom_bind, self.local_to_world,
                     self.skel_transforms, self.skinning_transforms, self.joint_world, self._skin_world)
         self._version += 1
+        if not self.collider.lazy:
+            self._bounds()
+
+    def _bounds(self):
+        if self._bounded == self._version:
+            return
+        self._bounded = self._version
+        d = self._data
         B._pose_bounds_serial(self._world1, *d.bounds.args(), self._sph, self._kb, self._db)
-        B._cull_spheres(self._sph, self._kb, self._db, self.spheres, self.cull)
+        B._cull_spheres(self._sph, self._kb, self._db, self._spheres, self._cull)
         if not self.collider.lazy:
             self._skin_all()
             d_, _ = SK.part_farthest(d.rest_points, d.joint_indices, d.joint_weights, self._skin_world,
@@ -375,7 +407,7 @@ class Pose:
     def _refit(self):
         """Parts whose stored sphere the bounds cannot prove: the bound's sphere when it is at
         most :data:`REFIT_FROM_BOUND` times larger, else the farthest skinned vertex."""
-        s = self.spheres
+        s = self.spheres  # computes the bounds
         bound = np.minimum(self._kb[0], self._db[0])
         grow = ~(bound <= s[:, 3])
         self.refit[:] = grow

@@ -39,6 +39,9 @@ PARTS_ATTRIBUTES = {
 PROVENANCE_KEY = "colossus"
 #: A SkelAnimation's customData key with the clip's own name when it is not a valid prim name.
 CLIP_NAME_KEY = "colossus:clipName"
+#: A SkelAnimation's customData key describing how the clip was sampled from its source
+#: (``sourceKeys``, ``interpolation``, ``sampling``, ``keysOnGrid``, ``errorBound`` stage units).
+CLIP_SOURCE_KEY = "colossus:source"
 #: Provenance keys of a simplified collision proxy (issue: collision proxy).  They are customData
 #: *key paths* (``GetCustomDataByKey``): ``customData["colossus"]["proxy"]["sourceFaces"]`` etc.,
 #: inside the provenance dictionary.  ``maxDeviation``: stage units, an upper bound of the

@@ -216,7 +216,10 @@ def _slope_spot(col, pose, r, lo=25.0, hi=40.0):
     cen = pts[tri].mean(1)
     nrm = pose.face_normals()
     ang = np.degrees(np.arccos(np.clip(nrm @ up, -1, 1)))
-    for f in np.argsort(np.abs(ang - (lo + hi) / 2)):
+    # closest to the middle slope first (to 0.01 degree: faces of one plane tie), then by position
+    # (not by the mesh's face order, which depends on the reader)
+    order = np.lexsort((cen[:, 2], cen[:, 1], cen[:, 0], np.round(np.abs(ang - (lo + hi) / 2), 2)))
+    for f in order:
         if not lo <= ang[f] <= hi:
             break
         near = np.linalg.norm(cen - cen[f], axis=1) < 0.5 * r

@@ -372,26 +372,13 @@ def test_harness_catches_a_time_shift_and_a_unit_error(corpus, tmp_path):
 
 
 # =============================================================================== (b) the corpus
-#: measured on today's importer (``python -m tests.reference.diagnose``); see FINDINGS.md
+#: measured on the issue-9 importer (``python -m tests.reference.diagnose``); see FINDINGS.md
 XFAIL = {
-    "khronos/RiggedSimple.gltf": "clip named 'clip', not 'animation_0' (common.clip_name); keys off any "
-                                 "grid (timeCodesPerSecond 0.98); motion itself 1e-7 x size",
-    "khronos/RiggedFigure.gltf": "clip named 'clip', not 'animation_0' (common.clip_name); motion 2e-7 x size",
-    "khronos/SimpleSkin.gltf": "clip named 'clip', not 'animation_0' (common.clip_name); motion 6e-8 x size",
-    "realworld/threejs_r121_CesiumMan.glb": "19 unnamed animations named clip, clip_2, ... not animation_0, ... "
-                                            "(common.clip_name); motion 5e-6 x size",
-    "realworld/godot_platformer_player.glb": "1.3e-4 x size at on-grid keys: the armature's 0.3 scale goes into the "
-                                             "root joint's half3 SkelAnimation scale (half(0.3)/0.3 = 1 + 1.6e-4)",
-    "realworld/threejs_r121_RobotExpressive.glb": "6106 of 7214 vertices missing: the 15 primitives (12 meshes) parented "
-                                                  "to bone nodes (rigid) are not imported (assimp_reader takes meshes with bones only)",
-    "realworld/openusd_lbs.usda": "1.8e-4 x size at on-grid keys: metersPerUnit 0.01 -> 1 goes into the root joint's "
-                                  "half3 scale (half(0.01)/0.01 = 1 + 2.1e-4)",
-    "realworld/usdwg_SoC-ElephantWithMonochord.usdc": "refused: meshes bound to 2 skeletons (usd_reader)",
-    "realworld/ufbx_maya_kenney_character_7700_binary.fbx": "import crashes: assimp_reader._mv gives (0, 1) for a bone "
-                                                            "with no weights; then framesPerSecond -1 (CustomFrameRate -1)",
-    "realworld/ufbx_maya_game_sausage_7500_binary_combined.fbx": "asset unreadable (framesPerSecond -1 from CustomFrameRate "
-                                                                 "-1); with --fps 24: stacks at stack-local time (0.06-0.29 x "
-                                                                 "size), deform 0.29 (Maya segment scale compensation ignored)",
+    "realworld/godot_mannequiny.glb": "2.0e-4 x size at on-grid keys (120 fps): animated stretch scales (0.98..1.03 "
+                                      "on thighs/feet) are stored as UsdSkel's half3 scales, rounded by up to 2^-11 of "
+                                      "themselves; UsdSkel has no exact representation (FINDINGS F2, second part)",
+    "realworld/playcanvas_lumberjack.glb": "3.8e-4 x size at on-grid keys (120 fps): Rigify DEF stretch scales (0.97..1.03) "
+                                           "rounded to half3 (FINDINGS F2, second part)",
 }
 
 

@@ -117,13 +117,42 @@ def test_weld_removes_degenerate_faces():
     mesh = synth.rigid_mesh(pos, tris)
     p = mesh.positions.copy()
     a, b = tris[0, 0], tris[0, 1]
-    p[b] = p[a] + 1e-8  # collapse one edge: its two faces become degenerate
+    p[b] = p[a]  # collapse one edge exactly: its two faces become degenerate
     out, rep = weld(mesh.replace(positions=p))
     assert rep.counts["degenerate_faces_removed"] == 2
     assert out.face_count == mesh.face_count - 2
     assert rep.counts["merged"] == 1
     empty = weld_maps(np.zeros((0, 3), np.float32), np.zeros((0, 1)), np.zeros((0, 1)), 0.1)
     assert [len(x) for x in empty[:2]] == [0, 0] and empty[2] == 0
+
+
+def test_weld_never_merges_vertices_of_one_triangle():
+    """A closed mesh with near-coincident vertices joined by an edge keeps every one of them
+    (Blender keeps them distinct; welding would collapse the edge and its two faces), while split
+    copies of the same vertices still merge."""
+    pos, tris = synth.icosphere(1)
+    mesh = synth.rigid_mesh(pos, tris)
+    p = mesh.positions.copy()
+    tol = 1e-6 * float(np.linalg.norm(p.max(0) - p.min(0)))
+    a, b = tris[0, 0], tris[0, 1]
+    c = tris[5, 2] if tris[5, 2] not in (a, b) else tris[5, 0]
+    p[b] = p[a] + np.float32(tol / 4)   # an edge shorter than the weld tolerance
+    p[c] = p[a] - np.float32(tol / 4)   # and a vertex near both that shares no triangle with a
+    closed = mesh.replace(positions=p)
+    out, rep = weld(closed)
+    shares = lambda u, v: np.any(np.isin(tris, [u]).any(1) & np.isin(tris, [v]).any(1))
+    assert shares(a, b)
+    assert rep.counts["degenerate_faces_removed"] == 0
+    assert out.face_count == mesh.face_count
+    # c may join a or b only if it shares a triangle with neither of them
+    expected_merges = 0 if (shares(a, c) and shares(b, c)) else 1
+    assert rep.counts["merged"] == expected_merges
+    # the same closed mesh split per corner (as FBX delivers it) welds back to exactly that mesh
+    split = synth.split_corners(closed)
+    out2, rep2 = weld(split)
+    assert out2.vertex_count == out.vertex_count
+    assert out2.face_count == mesh.face_count and rep2.counts["degenerate_faces_removed"] == 0
+    assert naive.inconsistent_edges(out2.triangles) == 0
 
 
 # -- orient ------------------------------------------------------------------------------------
@@ -412,6 +441,32 @@ def test_spheres_contain_every_frame(mode):
         assert det["slack_ratio"] == pytest.approx(r / det["tight_radius"], rel=1e-6)
     assert rep.counts["max_radius"] == pytest.approx(float(P.radii.max()))
     assert rep.counts["max_slack_ratio"] == pytest.approx(max(d["slack_ratio"] for d in rep.details["parts"]))
+
+
+def test_spheres_hold_under_a_sheared_joint():
+    """A parent's non-uniform stretch under a rotated child shears the child's transform: its
+    sphere, moved by the joint and scaled by the largest axis scale (the contract's rule), must
+    still hold every vertex (mannequiny's stretched thighs made COL403 fail)."""
+    from pipeline.model import Clip
+
+    mesh = synth.make_tube(frames=6)
+    bend = mesh.clip("bend").local.copy()
+    for f in range(len(bend)):
+        bend[f, 1] = bend[f, 1] @ np.diag([1.0, 1.0 + 0.3 * f / 5, 1.0, 1.0])  # mid stretches along y
+        bend[f, 2] = bend[f, 2] @ synth.rot("z", 0.8)                            # tip turned under it
+    mesh = mesh.replace(clips=(Clip("bend", mesh.clip("bend").times, bend),))
+    out, _ = spheres(parts(mesh)[0])
+    S = naive.all_poses(out)
+    skinned = naive.skin_points(out, S)
+    lin = S[..., :3, :3]
+    assert np.any(np.linalg.norm(lin, ord=2, axis=(-2, -1)) > np.linalg.norm(lin, axis=-2).max(-1) * (1 + 1e-3))
+    P = out.parts
+    for p, j in enumerate(P.joints):
+        verts = np.unique(out.triangles[P.part_faces(p)])
+        c = np.einsum("fij,j->fi", S[:, j, :3, :3], P.centers[p].astype(np.float64)) + S[:, j, :3, 3]
+        r = float(P.radii[p]) * np.linalg.norm(lin[:, j], axis=-2).max(-1)  # the contract's radius
+        d = np.linalg.norm(skinned[:, verts] - c[:, None], axis=2)
+        assert np.all(d <= r[:, None] * (1 + 1e-6)), (p, (d - r[:, None]).max())
 
 
 def test_spheres_needs_parts():

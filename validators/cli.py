@@ -56,6 +56,9 @@ def _list_rules(ctx, param, value):
 @click.option("--split-above", "split_above", metavar="SIZE", default="64M", show_default=True,
               help="With --jobs > 1 or --scheduler, prove assets at least this large one clip per task "
                    "(bytes, or K/M/G; 'never').")
+@click.option("--source", "source", type=click.Path(), default=None, metavar="FILE",
+              help="Also check the asset against the export it was made from (COL6xx): motion within "
+                   "1e-4 x model size on every frame, same clips and vertices; a different sha256 warns.")
 @click.option("--progress/--no-progress", default=None,
               help="Progress bar on stderr (default: when stderr is a terminal).")
 @click.option("-v", "--verbose", is_flag=True, help="Text format: list every finding, not only the worst.")
@@ -63,7 +66,7 @@ def _list_rules(ctx, param, value):
               help="Print the rule catalog and exit.")
 @maps_errors(input_status=2)
 def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, subframes, slack_ratio, max_deviation,
-                 jobs, scheduler, split_above, progress, verbose):
+                 jobs, scheduler, split_above, source, progress, verbose):
     """Check collider assets: PATHS are files, directories (searched for *.usd, *.usda,
     *.usdc, *.usdz) or globs ('assets/**/*.usda').  Exit 0 all pass, 1 any error finding,
     2 a path unreadable or usage, 130 interrupted (the report so far is still written, marked
@@ -94,11 +97,15 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
 
     from pipeline.stages.simplify import parse_max_deviation
     parse_max_deviation(max_deviation)  # a bad value is a usage error (exit 2) before any asset is read
+    if source is not None and not __import__("os").path.isfile(source):
+        click.echo(f"error: --source {source}: no such file", err=True)
+        click.get_current_context().exit(2)
     split_bytes = _size(split_above)
     show = sys.stderr.isatty() if progress is None else progress
     res = check_many(paths, jobs=jobs, scheduler=scheduler, progress=show, split_bytes=split_bytes,
                      select=sel, ignore=ign, severities=sev, max_influences=max_influences,
-                     subframes=subframes, slack_ratio=slack_ratio, max_deviation=max_deviation)
+                     subframes=subframes, slack_ratio=slack_ratio, max_deviation=max_deviation,
+                     **({"source": source} if source is not None else {}))
     reports, missing = res.reports, res.missing
     for m in missing:
         click.echo(f"error: {m}: no such file or directory", err=True)

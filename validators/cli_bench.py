@@ -39,7 +39,7 @@ def bench_cmd(quick, only):
         click.echo(rt_format(rt_run()))
     if "coldstart" in want:
         click.echo("\ncold start (NUMBA_CACHE_DIR pointed at an empty folder; goal < 5 s cold) and warm:")
-        coldstart(echo=click.echo)
+        coldstart(echo=click.echo, repeat=1 if quick else 2)
     if "scale" in want:
         click.echo()
         click.echo(format_scale_bench(run_scale_bench(**({"count": 40} if quick else {}))))

@@ -119,7 +119,7 @@ def source_mesh(asset, path) -> SourceMesh:
     from runtime import schema
 
     prov = asset.mesh.GetCustomDataByKey(schema.PROVENANCE_KEY) if asset.mesh is not None else None
-    settings = settings_from_provenance(prov if isinstance(prov, dict) else None)
+    settings = settings_from_provenance(dict((prov if isinstance(prov, dict) else {}).get("settings") or {}))
     settings.target_faces = settings.max_deviation = None
     mesh, _ = build_collider(os.fspath(path), settings, stop_after="bind")
     names = UsdSkel.Skeleton(asset.skeleton).GetJointNamesAttr().Get()

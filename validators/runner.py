@@ -24,6 +24,7 @@ DEFAULT_OPTIONS = {
     "chunk_frames": None,
     "clip_proofs": None,
     "max_deviation": None,
+    "source": None,
 }
 
 
@@ -32,7 +33,8 @@ class Context:
 
     Attributes: ``max_influences`` (int), ``subframes`` (int), ``slack_ratio`` (float),
     ``max_deviation`` (``(length, relative)`` or None: COL701's limit),
-    ``chunk_frames`` (int or None: automatic), ``clip_proofs`` (proofs of the asset's clips
+    ``chunk_frames`` (int or None: automatic), ``source`` (the export the asset was made from, for
+    the COL6xx rules; None: they do not run), ``clip_proofs`` (proofs of the asset's clips
     already run elsewhere, e.g. one per clip on other workers, merged instead of proving again;
     see :mod:`validators.parallel`).
     """
@@ -56,7 +58,16 @@ class Context:
         from pipeline.stages.simplify import parse_max_deviation
         #: ``(length, relative)`` or None: the COL701 limit (``--max-deviation``)
         self.max_deviation = parse_max_deviation(opts["max_deviation"])
+        self.source = opts["source"]
         self._proof = None
+        self._source_check = None
+
+    def source_check(self):
+        """The comparison with the ``source`` export (:func:`validators.source.compare_source`), once."""
+        if self._source_check is None:
+            from .source import compare_source
+            self._source_check = compare_source(self.asset, self.source)
+        return self._source_check
 
     def proof(self):
         if self._proof is None:

@@ -66,7 +66,10 @@ def summarize(asset: LoadedAsset) -> dict:
     ``defaultPrim``), ``prims`` (root, skeleton, mesh paths), ``counts`` (vertices, triangles,
     faces, joints, parts, clips, frames, influences: elementSize / nonzero / max_per_vertex /
     mean_per_vertex), ``joints`` (``[{"name", "path", "parent", "depth"}]``, parents first as
-    stored), ``clips`` (``[{"name", "frames", "start", "end", "seconds"}]``), ``parts``
+    stored), ``clips`` (``[{"name", "frames", "start", "end", "seconds", "source"}]``, ``source`` how
+    the clip was sampled from its source: ``sourceKeys``, ``interpolation``, ``sampling``,
+    ``keysOnGrid``, ``errorBound``), ``meshes`` (``[{"name", "kind", "vertices", "joint"}]``: the
+    source meshes in the collider, skinned or rigid), ``parts``
     (``[{"index", "joint", "faces", "radius"}]``) and ``provenance`` (the mesh's
     ``customData["colossus"]``, or ``{}``) and ``proxy`` (a simplified proxy's ``sourceFaces``,
     ``maxDeviation``, ``measuredDeviation``, ``worstClip``, ``worstFrame``, ``worstBone``,
@@ -121,6 +124,7 @@ def summarize(asset: LoadedAsset) -> dict:
         "start": float(c.times[0]) if len(c.times) else None,
         "end": float(c.times[-1]) if len(c.times) else None,
         "seconds": round(float(c.times[-1] - c.times[0]) / tcps, 4) if len(c.times) and tcps > 0 else None,
+        "source": _plain(dict(c.prim.GetCustomDataByKey(schema.CLIP_SOURCE_KEY) or {})),
     } for c in asset.clips]
     parts = []
     if P is not None and asset.part_offsets is not None and asset.part_radii is not None:
@@ -144,6 +148,7 @@ def summarize(asset: LoadedAsset) -> dict:
                         "worstClip": _plain(g(schema.PROXY_WORST_CLIP)), "worstFrame": _plain(g(schema.PROXY_WORST_FRAME)),
                         "worstBone": _plain(g(schema.PROXY_WORST_BONE)),
                         "worstDirection": _plain(g(schema.PROXY_WORST_DIRECTION))}
+    out["meshes"] = [{"name": k, **(v if isinstance(v, dict) else {})} for k, v in (prov.get("meshes") or {}).items()]
     return out
 
 
@@ -170,7 +175,7 @@ def format_summary(s: dict) -> str:
         p = s["provenance"]
         lines.append("")
         lines.append("provenance")
-        for key in ("source", "sourceSha256", "importer", "reader", "sourceFrame"):
+        for key in ("source", "sourceSha256", "importer", "reader", "sourceFrame"):  # meshes: own section
             if key in p:
                 lines.append(f"  {key:<13} {p[key]}")
         settings = p.get("settings") or {}
@@ -189,6 +194,12 @@ def format_summary(s: dict) -> str:
         meas = f"{_fmt(meas, '.4g')} measured" if isinstance(meas, (int, float)) else "largest measured"
         lines.append(f"  deviation     <= {_fmt(dev, '.4g') if isinstance(dev, (int, float)) else '-'}{rel}; {meas} at "
                      f"{where}, bone {px['worstBone'] or '-'} ({px['worstDirection'] or '-'})")
+    if s.get("meshes"):
+        lines.append("")
+        lines.append(f"source meshes ({len(s['meshes'])})")
+        for m in s["meshes"]:
+            bound = f"  bound to {m['joint']}" if m.get("joint") else ""
+            lines.append(f"  {str(m['name']):<28} {str(m.get('kind', '-')):<8} {_fmt(m.get('vertices'), 'd'):>8} vertices{bound}")
     if s["joints"]:
         lines.append("")
         lines.append(f"joints ({len(s['joints'])})")
@@ -199,8 +210,14 @@ def format_summary(s: dict) -> str:
     if not s["clips"]:
         lines.append("  (none)")
     for cl in s["clips"]:
+        src = cl.get("source") or {}
+        how = ""
+        if src:
+            how = f"  {src.get('sourceKeys', '-')} source keys, {src.get('sampling', '')}"
+            if "errorBoundRelative" in src:
+                how += f", off-grid error <= {src['errorBoundRelative']:.2g} x size"
         lines.append(f"  {cl['name']:<20} {cl['frames']:>5} frames  {_fmt(cl['seconds'], '.3f'):>8} s  "
-                     f"time codes {_fmt(cl['start'])}..{_fmt(cl['end'])}")
+                     f"time codes {_fmt(cl['start'])}..{_fmt(cl['end'])}{how}")
     lines.append("")
     lines.append(f"parts ({len(s['parts'])})")
     if s["parts"]:

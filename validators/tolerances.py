@@ -32,3 +32,7 @@ TIME_CODE_EPS = 1e-6
 CHUNK_BYTES = 32 * 1024 * 1024
 #: ... and at most this many frames per chunk.
 CHUNK_FRAMES = 256
+#: ``--source``: the asset's motion must match the source's within this on every frame.
+SOURCE_MOTION_RELATIVE = 1e-4
+#: ``--source``: an asset vertex and a source vertex closer than this at the bind pose are the same.
+SOURCE_MATCH_RELATIVE = 1e-5

@@ -11,6 +11,7 @@ import os
 
 from ..errors import InputError
 from .assimp_reader import read_assimp
+from .gltf_reader import read_gltf
 from .usd_reader import read_usd
 
 #: Extensions assimp 5.x/6.x imports (https://assimp-docs.readthedocs.io, "Importer formats").
@@ -27,6 +28,7 @@ USD_EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz")
 #: extension -> reader function ``(path, meshes=None, fps=None) -> SkinnedMesh``
 READERS = {ext: read_assimp for ext in ASSIMP_EXTENSIONS}
 READERS.update({ext: read_usd for ext in USD_EXTENSIONS})
+READERS.update({".glb": read_gltf, ".gltf": read_gltf})  # read from the spec: samplers, morph targets, skins
 
 
 def reader_for(path):

@@ -1,4 +1,4 @@
-"""Helpers shared by the readers: input checks, allocation cap, influence packing, frame rates."""
+"""Helpers shared by the readers: input checks, allocation cap, influence packing, clip names."""
 
 from __future__ import annotations
 
@@ -8,9 +8,6 @@ import numpy as np
 
 from ..errors import InputError
 from ..tolerances import ALLOC_FACTOR, ALLOC_FLOOR
-
-#: Frame rates a time step is snapped to when inferring a file's rate from its key times.
-COMMON_FPS = (8, 10, 12, 15, 23.976, 24, 25, 29.97, 30, 48, 50, 59.94, 60, 90, 100, 120, 240)
 
 
 def check_input_file(path) -> int:
@@ -62,6 +59,9 @@ def pack_influences(n: int, vertex: np.ndarray, joint: np.ndarray, weight: np.nd
     weight = np.asarray(weight, dtype=np.float64)
     keep = weight > 0
     vertex, joint, weight = vertex[keep], joint[keep], weight[keep]
+    fast = _pack_sorted(n, vertex, joint, weight)
+    if fast is not None:
+        return fast
     # Merge duplicate (vertex, joint) entries by summing.
     if len(vertex):
         key = vertex * (int(joint.max()) + 1) + joint
@@ -83,15 +83,33 @@ def pack_influences(n: int, vertex: np.ndarray, joint: np.ndarray, weight: np.nd
     return ji, jw
 
 
-def infer_fps(seconds_steps, fallback: float = 24.0) -> float:
-    """Infer a frame rate from the positive time steps (seconds) between keys of a file."""
-    steps = np.asarray(seconds_steps, dtype=np.float64)
-    steps = steps[steps > 1e-6]
-    if len(steps) == 0:
-        return float(fallback)
-    fps = 1.0 / float(np.median(steps))
-    best = min(COMMON_FPS, key=lambda c: abs(fps - c))
-    return float(best) if abs(fps - best) <= 0.002 * best else round(fps, 3)
+def _pack_sorted(n, vertex, joint, weight):
+    """:func:`pack_influences` for the common case of entries grouped by vertex (a glTF
+    ``JOINTS_0``/``WEIGHTS_0`` set, assimp's per-vertex weights): a few row sorts instead of
+    sorting every entry.  None when the entries are not grouped or a vertex names a joint twice
+    (the general path merges those)."""
+    if not len(vertex):
+        return None
+    if np.any(np.diff(vertex) < 0):
+        return None
+    counts = np.bincount(vertex, minlength=n)
+    k = max(1, int(counts.max()))
+    starts = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(counts, out=starts[1:])
+    slot = np.arange(len(vertex)) - starts[vertex]
+    ji = np.full((n, k), -1, dtype=np.int64)
+    jw = np.zeros((n, k), dtype=np.float64)
+    ji[vertex, slot] = joint
+    jw[vertex, slot] = weight
+    if k > 1:
+        sj = np.sort(ji, axis=1)
+        if np.any((sj[:, 1:] == sj[:, :-1]) & (sj[:, 1:] >= 0)):
+            return None
+        order = np.argsort(-jw, axis=1, kind="stable")
+        ji = np.take_along_axis(ji, order, axis=1)
+        jw = np.take_along_axis(jw, order, axis=1)
+    ji[ji < 0] = 0
+    return ji.astype(np.int32), jw.astype(np.float32)
 
 
 def clip_name(raw: str, taken: set) -> str:

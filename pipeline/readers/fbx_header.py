@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import re
 import struct
+from zlib import error as zlib_error
 
 _MAGIC = b"Kaydara FBX Binary  \x00"
 
@@ -31,7 +32,96 @@ def read_global_settings(path) -> dict:
         return {}
 
 
-def _binary(data: bytes) -> dict:
+def read_morph_geometry(path) -> dict:
+    """``{name: number of blend-shape channels}`` for every FBX mesh with shape keys, keyed by
+    both its Model and its Geometry name (assimp names meshes after either).  Binary FBX only;
+    never raises (``{}`` when unreadable)."""
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+        if not data.startswith(_MAGIC):
+            return {}
+        return _morphs(data)
+    except (OSError, struct.error, IndexError, ValueError, UnicodeError, zlib_error):
+        return {}
+
+
+#: FBX time units per second (FbxTime).
+KTIME_PER_SECOND = 46186158000
+
+
+def read_anim_stacks(path) -> dict:
+    """``{stack name: (start, stop)}`` in seconds of global scene time, from each
+    ``AnimationStack``'s ``LocalStart``/``LocalStop`` (binary FBX only; ``{}`` when unreadable).
+
+    assimp shifts every stack's keys so that the stack starts at time 0; this gives the shift
+    back (stacks placed one after another on the global timeline keep their own times)."""
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+        if not data.startswith(_MAGIC):
+            return {}
+        nodes, props, sentinel = _walker(data)
+        out = {}
+        for top, _, _, children_at, end in nodes(27, len(data)):
+            if top != "Objects":
+                continue
+            for cname, p_at, p_n, c_children, c_end in nodes(children_at, end - sentinel + 1):
+                if cname != "AnimationStack" or p_n < 2:
+                    continue
+                vals = props(p_at, 2)
+                name = str(vals[1]).split("\x00")[0].split("::")[-1]
+                span = {}
+                for pname, _, _, pc, pe in nodes(c_children, c_end - sentinel + 1):
+                    if pname != "Properties70":
+                        continue
+                    for q, q_at, q_n, _, _ in nodes(pc, pe - sentinel + 1):
+                        if q == "P" and q_n >= 5:
+                            v = props(q_at, q_n)
+                            if v[0] in ("LocalStart", "LocalStop", "ReferenceStart", "ReferenceStop"):
+                                span[v[0]] = float(v[4]) / KTIME_PER_SECOND
+                start = span.get("LocalStart", span.get("ReferenceStart"))
+                stop = span.get("LocalStop", span.get("ReferenceStop"))
+                if start is not None and stop is not None and stop >= start:
+                    out[name] = (start, stop)
+        return out
+    except (OSError, struct.error, IndexError, ValueError, UnicodeError, zlib_error):
+        return {}
+
+
+def read_inherit_types(path) -> dict:
+    """``{model name: InheritType}`` for every FBX ``Model`` whose ``InheritType`` is authored
+    (0 RrSs... FbxTransform::EInheritType: 0 eInheritRrSs, 1 eInheritRSrs, 2 eInheritRrs; Maya's
+    joints with segment scale compensation are 2).  Binary FBX only; ``{}`` when unreadable."""
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+        if not data.startswith(_MAGIC):
+            return {}
+        nodes, props, sentinel = _walker(data)
+        out = {}
+        for top, _, _, children_at, end in nodes(27, len(data)):
+            if top != "Objects":
+                continue
+            for cname, p_at, p_n, c_children, c_end in nodes(children_at, end - sentinel + 1):
+                if cname != "Model" or p_n < 2:
+                    continue
+                vals = props(p_at, 2)
+                name = str(vals[1]).split("\x00")[0].split("::")[-1]
+                for pname, _, _, pc, pe in nodes(c_children, c_end - sentinel + 1):
+                    if pname != "Properties70":
+                        continue
+                    for q, q_at, q_n, _, _ in nodes(pc, pe - sentinel + 1):
+                        if q == "P" and q_n >= 5:
+                            v = props(q_at, q_n)
+                            if v[0] == "InheritType":
+                                out[name] = int(v[4])
+        return out
+    except (OSError, struct.error, IndexError, ValueError, UnicodeError, zlib_error):
+        return {}
+
+
+def _walker(data: bytes):
     version = struct.unpack_from("<I", data, 23)[0]
     wide = version >= 7500
     head = struct.Struct("<QQQB" if wide else "<IIIB")
@@ -65,6 +155,47 @@ def _binary(data: bytes) -> dict:
                 out.append(None)
         return out
 
+    return nodes, props, sentinel
+
+
+def _morphs(data: bytes) -> dict:
+    nodes, props, sentinel = _walker(data)
+    kind, name = {}, {}
+    links = []
+    for top, _, _, children_at, end in nodes(27, len(data)):
+        if top == "Objects":
+            for cname, p_at, p_n, _, _ in nodes(children_at, end - sentinel + 1):
+                if cname in ("Geometry", "Deformer", "Model") and p_n >= 3:
+                    vals = props(p_at, 3)
+                    if isinstance(vals[0], int) and isinstance(vals[1], str):
+                        kind[vals[0]] = (cname, vals[2])
+                        name[vals[0]] = vals[1].split("\x00")[0].split("::")[-1]
+        elif top == "Connections":
+            for cname, p_at, p_n, _, _ in nodes(children_at, end - sentinel + 1):
+                if cname == "C" and p_n >= 3:
+                    vals = props(p_at, 3)
+                    if vals[0] == "OO":
+                        links.append((vals[1], vals[2]))
+    channels = {}
+    parent_of = {}
+    for child, parent in links:
+        parent_of.setdefault(child, []).append(parent)
+        if kind.get(child) == ("Deformer", "BlendShapeChannel"):
+            channels[parent] = channels.get(parent, 0) + 1
+    out = {}
+    for bs, count in channels.items():
+        for geo in parent_of.get(bs, []):
+            if kind.get(geo, ("",))[0] != "Geometry":
+                continue
+            out[name[geo]] = max(out.get(name[geo], 0), count)
+            for model in parent_of.get(geo, []):
+                if kind.get(model, ("",))[0] == "Model":
+                    out[name[model]] = max(out.get(name[model], 0), count)
+    return out
+
+
+def _binary(data: bytes) -> dict:
+    nodes, props, sentinel = _walker(data)
     for name, pat, nprops, children_at, end in nodes(27, len(data)):
         if name != "GlobalSettings":
             continue

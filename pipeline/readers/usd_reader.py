@@ -1,14 +1,21 @@
 """Reader for USD (``.usd``, ``.usda``, ``.usdc``, ``.usdz``) skinned meshes, through usd-core's UsdSkel.
 
-* Skeleton space is stage (world) space: the Skeleton prim's local-to-world transform is folded
-  into the root joints (per frame, so an animated SkelRoot is kept) and into the bind and
-  geom-bind transforms.
-* Every ``SkelAnimation`` prim in the file bound to (or written for) the chosen skeleton is one
-  clip, sampled at its own joint-transform time samples.  Blender's USD export writes only the
-  active action, so its files have one clip.
+The stage becomes a :class:`~pipeline.readers.scene.Scene` and goes through the same
+:func:`~pipeline.readers.scene.build` as every node-graph format:
+
+* Nodes: one per Skeleton prim (its local-to-world transform, animated when the prims above it
+  are), with that skeleton's joints under it (their ``restTransforms``, what UsdSkel poses a
+  joint with when no animation drives it; the bind pose made joint-local where absent).
+  Several skeletons in one file become one skeleton with several roots; ``--mesh`` narrows it.
+* Meshes: every ``Mesh`` with joint influences bound to a skeleton, its points put through
+  ``geomBindTransform``; constant interpolation (a rigid binding) applies the one set of
+  influences to every point.  Each skin's inverse binds are the inverse ``bindTransforms``.
+* Clips: the animations bound as ``skel:animationSource`` play together as the first clip (what
+  usdview shows); every other ``SkelAnimation`` is a clip of its own, driving the skeleton whose
+  joints it names.  Each of ``translations``, ``rotations`` and ``scales`` is a channel with its
+  own time samples, interpolated as UsdSkel does (lerp, and slerp for rotations).  Time codes
+  become seconds through ``timeCodesPerSecond``.
 * Units and axes come from the stage's ``metersPerUnit`` and ``upAxis``.
-* Rest transforms are the bind pose made joint-local (the file's ``restTransforms`` are not
-  used): joints a clip does not animate hold their bind pose.
 """
 
 from __future__ import annotations
@@ -18,8 +25,9 @@ import os
 import numpy as np
 
 from ..errors import InputError
-from ..model import Clip, SkinnedMesh
-from .common import AllocationBudget, check_finite, check_input_file, clip_name
+from ..xforms import decompose_trs
+from .common import AllocationBudget, check_finite, check_input_file
+from .scene import Animation, Channel, Scene, SceneMesh, Skin, build
 
 
 def _m44(values) -> np.ndarray:
@@ -58,17 +66,18 @@ def _triangulate(counts: np.ndarray, indices: np.ndarray, path, name) -> np.ndar
     return np.stack([indices[s], indices[s + k + 1], indices[s + k + 2]], axis=1)
 
 
-def read_usd(path, meshes=None, fps=None) -> SkinnedMesh:
-    """Read a UsdSkel skinned mesh and every SkelAnimation of its skeleton.
+def read_usd(path, meshes=None, fps=None):
+    """Read every UsdSkel skinned mesh of a stage and every SkelAnimation (see the module docstring).
 
     Parameters
     ----------
     path : str or PathLike
     meshes : list of str, optional
-        Names (prim names or paths) of the meshes to take; default every mesh bound to the
+        Names (prim names or paths) of the meshes to take; default every mesh bound to a
         skeleton, merged.
     fps : float, optional
-        Override of the stage's ``timeCodesPerSecond`` (time codes are kept as they are).
+        Frame grid rate; default the stage's ``timeCodesPerSecond`` when every sample falls on
+        a whole time code.
     """
     from pxr import Usd, UsdGeom, UsdSkel
 
@@ -76,9 +85,11 @@ def read_usd(path, meshes=None, fps=None) -> SkinnedMesh:
     size = check_input_file(path)
     budget = AllocationBudget(path, size)
     stage = _open(path)
-    up = UsdGeom.GetStageUpAxis(stage)
+    up = str(UsdGeom.GetStageUpAxis(stage))
     mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
     tcps = float(stage.GetTimeCodesPerSecond())
+    if not (tcps > 0):
+        raise InputError(path, f"timeCodesPerSecond is {tcps:g}")
     early = Usd.TimeCode.EarliestTime()
 
     cache = UsdSkel.Cache()
@@ -107,45 +118,75 @@ def read_usd(path, meshes=None, fps=None) -> SkinnedMesh:
         if not any(p.IsA(UsdGeom.Mesh) for p in stage.Traverse()):
             raise InputError(path, "the stage has no mesh")
         raise InputError(path, "no skinned mesh: no Mesh is bound to a Skeleton with joint influences inside a SkelRoot (a mesh with no skin cannot be animated)")
-    skels = {str(s.GetPrim().GetPath()) for s, _ in targets}
-    if len(skels) > 1:
-        raise InputError(path, f"meshes are bound to {len(skels)} different skeletons ({', '.join(sorted(skels))}); choose meshes of one with --mesh")
-    skel = targets[0][0]
-    skel_query = cache.GetSkelQuery(skel)
-    if not skel_query:
-        raise InputError(path, f"skeleton {skel.GetPrim().GetPath()} is invalid (check its joints)")
-    joints = [str(j) for j in skel_query.GetJointOrder()]
-    if not joints:
-        raise InputError(path, f"skeleton {skel.GetPrim().GetPath()} has no joints")
-    topo = skel_query.GetTopology()
-    ok, why = topo.Validate()
-    if not ok:
-        raise InputError(path, f"skeleton joints are not a valid hierarchy: {why}")
-    parents = np.array(topo.GetParentIndices(), dtype=np.int32)
-    nj = len(joints)
-    bind_attr = skel.GetBindTransformsAttr().Get()
-    if bind_attr is None or len(bind_attr) != nj:
-        raise InputError(path, f"skeleton has {0 if bind_attr is None else len(bind_attr)} bindTransforms for {nj} joints")
-    bind = _m44(bind_attr)
-    check_finite(path, "bind transforms", bind.reshape(nj, -1))
-    # The rest pose is the bind pose expressed joint-local, as for every other format (Blender's
-    # USD export writes restTransforms that do not compose to its bindTransforms).
-    rest_local = np.empty_like(bind)
-    for k, p in enumerate(parents):
-        rest_local[k] = bind[k] if p < 0 else np.linalg.solve(bind[p], bind[k])
-    xf_cache = UsdGeom.XformCache(early)
-    skel_w0 = _m44(xf_cache.GetLocalToWorldTransform(skel.GetPrim()))
+    gprims = sorted({str(q.GetPrim().GetPath()) for b in bindings for q in b.GetSkinningTargets()
+                     if not q.GetPrim().IsA(UsdGeom.Mesh) and q.GetPrim().IsA(UsdGeom.Gprim)})
 
-    # ---- geometry ---------------------------------------------------------------------------
-    pos_list, tri_list, vj, jj, ww = [], [], [], [], []
-    geom_bind = None
-    base = 0
-    names = []
-    for _, q in targets:
+    # ---- skeletons as nodes: one node per Skeleton prim, its joints below it ------------------
+    skels, skel_of = [], {}
+    for s, _ in targets:
+        key = str(s.GetPrim().GetPath())
+        if key not in skel_of:
+            skel_of[key] = len(skels)
+            skels.append(s)
+    names, parents, local, node_path = [], [], [], []
+    skel_node, joint_node, skel_joints, skel_bind, skel_w0 = [], [], [], [], []
+    xf0 = UsdGeom.XformCache(early)
+    for s in skels:
+        sq = cache.GetSkelQuery(s)
+        if not sq:
+            raise InputError(path, f"skeleton {s.GetPrim().GetPath()} is invalid (check its joints)")
+        joints = [str(j) for j in sq.GetJointOrder()]
+        if not joints:
+            raise InputError(path, f"skeleton {s.GetPrim().GetPath()} has no joints")
+        topo = sq.GetTopology()
+        ok, why = topo.Validate()
+        if not ok:
+            raise InputError(path, f"skeleton {s.GetPrim().GetPath()}: joints are not a valid hierarchy: {why}")
+        jparents = np.array(topo.GetParentIndices(), dtype=np.int64)
+        nj = len(joints)
+        bind_attr = s.GetBindTransformsAttr().Get()
+        if bind_attr is None or len(bind_attr) != nj:
+            raise InputError(path, f"skeleton {s.GetPrim().GetPath()} has {0 if bind_attr is None else len(bind_attr)} bindTransforms for {nj} joints")
+        bind = _m44(bind_attr)
+        check_finite(path, "bind transforms", bind.reshape(nj, -1))
+        rest_attr = s.GetRestTransformsAttr().Get()
+        if rest_attr is not None and len(rest_attr) == nj:
+            rest = _m44(rest_attr)
+            check_finite(path, "rest transforms", rest.reshape(nj, -1))
+        else:  # the bind pose made joint-local
+            rest = np.empty_like(bind)
+            for k, p in enumerate(jparents):
+                rest[k] = bind[k] if p < 0 else np.linalg.solve(bind[p], bind[k])
+        w0 = _m44(xf0.GetLocalToWorldTransform(s.GetPrim()))
+        sn = len(names)
+        names.append(s.GetPrim().GetName())
+        parents.append(-1)
+        local.append(w0)
+        node_path.append(s.GetPrim())
+        base = len(names)
+        # UsdSkel joint order is parents first (Topology.Validate checked it)
+        for k, j in enumerate(joints):
+            names.append(j.split("/")[-1])
+            parents.append(sn if jparents[k] < 0 else base + int(jparents[k]))
+            local.append(rest[k])
+            node_path.append(None)
+        skel_node.append(sn)
+        joint_node.append(np.arange(base, base + nj))
+        skel_joints.append(joints)
+        skel_bind.append(bind)
+        skel_w0.append(w0)
+    parents = np.array(parents, dtype=np.int64)
+    local = np.array(local)
+
+    # ---- geometry -----------------------------------------------------------------------------
+    scene_meshes = []
+    for s, q in targets:
+        si = skel_of[str(s.GetPrim().GetPath())]
+        joints = skel_joints[si]
+        nj = len(joints)
         prim = q.GetPrim()
         mesh = UsdGeom.Mesh(prim)
         name = str(prim.GetPath())
-        names.append(prim.GetName())
         pts = mesh.GetPointsAttr().Get(early)
         if pts is None or len(pts) == 0:
             raise InputError(path, f"mesh {name} has no points")
@@ -161,12 +202,8 @@ def read_usd(path, meshes=None, fps=None) -> SkinnedMesh:
             raise InputError(path, f"mesh {name}: face vertex index out of range for {nv} points")
         if mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
             tri = tri[:, ::-1]
-        g = skel_w0 @ _m44(q.GetGeomBindTransform(early))
-        if geom_bind is None:
-            geom_bind = g
-        rel = np.linalg.solve(geom_bind, g)
-        if not np.allclose(rel, np.eye(4), atol=1e-9):
-            p = p @ rel[:3, :3].T + rel[:3, 3]
+        g = _m44(q.GetGeomBindTransform(early))
+        p = p @ g[:3, :3].T + g[:3, 3]  # into skeleton space at bind time
         inf = q.ComputeJointInfluences(early)
         if not inf:
             raise InputError(path, f"mesh {name}: joint influences cannot be read")
@@ -186,62 +223,113 @@ def read_usd(path, meshes=None, fps=None) -> SkinnedMesh:
             if len(ji) and (ji.max() >= len(lut) or ji.min() < 0):
                 raise InputError(path, f"mesh {name}: joint index out of range for its {len(lut)} skel:joints")
             ji = lut[ji]
-        if len(ji) and (ji.max() >= nj or ji.min() < 0):
+        if len(ji) and (ji.max() >= nj or ji.min() < 0):  # UsdSkel refuses these even at weight 0
             raise InputError(path, f"mesh {name}: joint index {int(ji.max()) if ji.max() >= nj else int(ji.min())} out of range for {nj} joints")
+        live = jw > 0
         check_finite(path, f"mesh {name} joint weights", jw[:, None])
-        pos_list.append(p)
-        tri_list.append(tri + base)
-        vj.append(np.repeat(np.arange(nv) + base, k))
-        jj.append(ji)
-        ww.append(jw)
-        base += nv
-    from .common import pack_influences
-    ji, jw = pack_influences(base, np.concatenate(vj), np.concatenate(jj), np.concatenate(ww))
+        if np.any(jw < 0):
+            raise InputError(path, f"mesh {name}: negative joint weights")
+        blend = UsdSkel.BindingAPI(prim).GetBlendShapesAttr().Get()
+        skin = Skin(joint_node[si], np.linalg.inv(skel_bind[si]), [j.split("/")[-1] for j in joints],
+                    np.repeat(np.arange(nv), k)[live], ji[live], jw[live])
+        scene_meshes.append(SceneMesh(name=prim.GetName(), node=skel_node[si], positions=p, triangles=tri,
+                                      to_world=skel_w0[si], skin=skin, morph_targets=len(blend or [])))
 
-    # ---- clips ------------------------------------------------------------------------------
-    anim_prims = []
-    src = skel_query.GetAnimQuery()
-    if src:
-        anim_prims.append(src.GetPrim())
-    for prim in stage.Traverse():
-        if prim.IsA(UsdSkel.Animation) and all(prim != a for a in anim_prims):
-            anim_prims.append(prim)
-    clips, taken = [], set()
-    for prim in anim_prims:
-        aq = cache.GetAnimQuery(UsdSkel.Animation(prim))
+    # ---- clips ----------------------------------------------------------------------------------
+    def channels_of(anim_prim, si):
+        aq = cache.GetAnimQuery(UsdSkel.Animation(anim_prim))
         if not aq:
-            continue
-        times = sorted(aq.GetJointTransformTimeSamples())
-        if not times:
-            continue  # a static pose, not a clip
-        anim_joints = [str(j) for j in aq.GetJointOrder()]
-        unknown = [j for j in anim_joints if j not in joints]
-        if len(unknown) == len(anim_joints):
-            continue  # animation of another skeleton
-        budget.claim(len(times) * nj * 16 * 8 * 3, f"animation {prim.GetName()!r} ({len(times)} frames)")
-        lut = np.array([joints.index(j) if j in joints else -1 for j in anim_joints])
-        local = np.broadcast_to(rest_local, (len(times), nj, 4, 4)).copy()
-        for f, t in enumerate(times):
-            xf = aq.ComputeJointLocalTransforms(Usd.TimeCode(t))
-            if xf is None or len(xf) != len(anim_joints):
-                raise InputError(path, f"animation {prim.GetPath()}: cannot compute joint transforms at time {t}")
-            m = _m44(xf)
-            local[f, lut[lut >= 0]] = m[lut >= 0]
-            w = _m44(UsdGeom.XformCache(Usd.TimeCode(t)).GetLocalToWorldTransform(skel.GetPrim()))
-            local[f, parents < 0] = w @ local[f, parents < 0]
-        check_finite(path, f"animation {prim.GetName()!r} joint transforms", local.reshape(len(times), -1))
-        clips.append(Clip(clip_name(prim.GetName(), taken), np.array(times, dtype=np.float64), local))
+            return []
+        a = UsdSkel.Animation(anim_prim)
+        anim_joints = [str(j) for j in (a.GetJointsAttr().Get() or [])]
+        lut = {j: i for i, j in enumerate(skel_joints[si])}
+        cols = np.array([lut.get(j, -1) for j in anim_joints], dtype=np.int64)
+        out = []
+        for attr, code, width in ((a.GetTranslationsAttr(), "t", 3), (a.GetRotationsAttr(), "r", 4),
+                                  (a.GetScalesAttr(), "s", 3)):
+            times = attr.GetTimeSamples() if attr else []
+            static = not times
+            if times:
+                vals = [attr.Get(Usd.TimeCode(t)) for t in times]
+            elif attr and attr.HasAuthoredValue():
+                times, vals = [0.0], [attr.Get()]
+            else:
+                continue
+            budget.claim(len(times) * len(anim_joints) * width * 8 * 2, f"animation {anim_prim.GetName()!r}")
+            arr = []
+            for t, v in zip(times, vals):
+                if v is None or len(v) != len(anim_joints):
+                    raise InputError(path, f"animation {anim_prim.GetPath()}: {attr.GetName()} at time {t:g} has "
+                                     f"{0 if v is None else len(v)} values for {len(anim_joints)} joints")
+                arr.append(np.array(v, dtype=np.float64).reshape(len(anim_joints), -1))
+            arr = np.array(arr)  # (k, joints, width); quaternions come (x, y, z, w)
+            check_finite(path, f"animation {anim_prim.GetName()!r} {attr.GetName()}", arr.reshape(len(times), -1))
+            if code == "r":
+                nrm = np.linalg.norm(arr, axis=2, keepdims=True)
+                if np.any(nrm < 1e-12):
+                    raise InputError(path, f"animation {anim_prim.GetPath()}: a zero rotation quaternion")
+                arr = arr / nrm
+            secs = np.array(times, dtype=np.float64) / tcps
+            for c, col in enumerate(cols):
+                if col >= 0:
+                    out.append(Channel(int(joint_node[si][col]), code, secs, arr[:, c], static=static))
+        return out
 
-    jnames = [j.split("/")[-1] for j in joints]
-    rest_world = rest_local.copy()  # skeleton space is world space: roots carry the skeleton's transform
-    rest_world[parents < 0] = skel_w0 @ rest_local[parents < 0]
-    return SkinnedMesh(
-        positions=np.concatenate(pos_list).astype(np.float32), triangles=np.concatenate(tri_list),
-        joint_indices=ji, joint_weights=jw, joint_names=jnames, parents=parents,
-        bind_transforms=skel_w0 @ bind, rest_transforms=rest_world, geom_bind=geom_bind,
-        clips=tuple(clips), up_axis=str(up), meters_per_unit=mpu,
-        time_codes_per_second=float(fps) if fps else tcps,
-        source={"file": os.path.basename(path), "format": os.path.splitext(path)[1].lstrip(".").lower(),
-                "reader": "usd", "meshes": names,
-                "frame": f"USD stage: upAxis={up}, metersPerUnit={mpu:g}"},
-    )
+    def skel_motion(si, seconds):
+        """Channels of the skeleton prim's own world transform when the prims above it move."""
+        prim = skels[si].GetPrim()
+        times = set()
+        p = prim
+        while p and not p.IsPseudoRoot():
+            if p.IsA(UsdGeom.Xformable):
+                for op in UsdGeom.Xformable(p).GetOrderedXformOps():
+                    times.update(op.GetTimeSamples())
+            p = p.GetParent()
+        if len(times) < 2:
+            return []
+        ts = np.array(sorted(times))
+        w = np.array([_m44(UsdGeom.XformCache(Usd.TimeCode(t)).GetLocalToWorldTransform(prim)) for t in ts])
+        t_, q_, s_ = decompose_trs(w)
+        secs = ts / tcps
+        node = skel_node[si]
+        return [Channel(node, "t", secs, t_), Channel(node, "r", secs, q_), Channel(node, "s", secs, s_)]
+
+    anims, used = [], set()
+    bound = []
+    for si, s in enumerate(skels):
+        src = cache.GetSkelQuery(s).GetAnimQuery()
+        if src:
+            bound.append((si, src.GetPrim()))
+    if bound:
+        chans = []
+        for si, prim in bound:
+            chans += channels_of(prim, si)
+            used.add(str(prim.GetPath()))
+        anims.append(Animation(bound[0][1].GetName(), chans))
+    for prim in stage.Traverse():
+        if not prim.IsA(UsdSkel.Animation) or str(prim.GetPath()) in used:
+            continue
+        a = UsdSkel.Animation(prim)
+        aj = set(str(j) for j in (a.GetJointsAttr().Get() or []))
+        si = next((i for i, js in enumerate(skel_joints) if aj and aj <= set(js)), None)
+        if si is None:
+            si = max(range(len(skels)), key=lambda i: len(aj & set(skel_joints[i])))
+            if not aj & set(skel_joints[si]):
+                continue  # an animation of another skeleton
+        anims.append(Animation(prim.GetName(), channels_of(prim, si)))
+    for a in anims:
+        if a.channels:
+            for si in range(len(skels)):
+                a.channels += skel_motion(si, None)
+    anims = [a for a in anims if any(len(c.times) and not c.static for c in a.channels)]
+    scene = Scene(names=names, parents=parents, local=local, meshes=scene_meshes, animations=anims,
+                  fps_hint=tcps, sampling_note="UsdSkel time samples, lerp / slerp between")
+    notes = []
+    if gprims:
+        notes.append(f"{len(gprims)} implicit gprims bound to the skeleton are not meshes and were left out: "
+                     + ", ".join(g.rsplit('/', 1)[-1] for g in gprims[:5]))
+    mesh = build(scene, path, meshes=None, fps=fps, budget=budget,
+                 source={"file": os.path.basename(path), "format": os.path.splitext(path)[1].lstrip(".").lower(),
+                         "reader": "usd", "frame": f"USD stage: upAxis={up}, metersPerUnit={mpu:g}"})
+    mesh.source["notes"] = notes + mesh.source["notes"]
+    return mesh.replace(up_axis=up, meters_per_unit=mpu)

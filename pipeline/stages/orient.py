@@ -11,13 +11,14 @@ gives every face a flip parity (the parity of "same direction" edges along the B
   original faces (the choice that flips fewer faces).
 
 Edges still traversed twice in the same direction afterwards belong to non-orientable pieces
-(a Möbius strip) and are reported.  Cost: two integer sorts and a linear numba BFS.
+(a Möbius strip) and are reported.  Cost: a few integer sorts and scipy's BFS.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from pipeline.model import SkinnedMesh
 from pipeline.stages import StageReport
@@ -27,46 +28,62 @@ from pipeline.stages import StageReport
 _FLAT_VOLUME_REL = 1e-9
 
 
-@njit(cache=True)
 def _bfs_parity(indptr, neighbors, odd, m):
-    """Shells and flip parities by BFS over the face graph (CSR).
+    """Shells and flip parities by breadth-first search over the face graph (CSR).
 
     Parameters
     ----------
     indptr : (m + 1,) int64
-    neighbors : (e,) int64
+    neighbors : (e,) int64, sorted within each face's row (scipy's csgraph may sort them, so
+        the tree below is the one a BFS scanning them in that order builds)
     odd : (e,) uint8, 1 when the two faces traverse their shared edge in the same direction.
     m : int, face count.
 
     Returns
     -------
     shell : (m,) int64, shell id of each face (numbered in order of their lowest face).
-    parity : (m,) uint8, flip relative to the shell's first face.
+    parity : (m,) uint8, flip relative to the shell's first face along the BFS tree (the same on
+        any tree for an orientable shell).
     count : int, number of shells.
+
+    scipy's csgraph does the searching: shells are the connected components; one BFS from an
+    extra node linked to each shell's lowest face visits every shell as a BFS from that face
+    would, scanning each face's neighbours in CSR order (so a face is reached through its first
+    CSR entry from its BFS parent, whose ``odd`` is that tree edge's).  The parity, the XOR of
+    ``odd`` along the tree path to the shell's first face, is accumulated by pointer doubling.
     """
-    shell = np.full(m, -1, np.int64)
-    parity = np.zeros(m, np.uint8)
-    queue = np.empty(m, np.int64)
-    count = 0
-    for seed in range(m):
-        if shell[seed] >= 0:
-            continue
-        shell[seed] = count
-        head = 0
-        tail = 1
-        queue[0] = seed
-        while head < tail:
-            f = queue[head]
-            head += 1
-            for e in range(indptr[f], indptr[f + 1]):
-                g = neighbors[e]
-                if shell[g] < 0:
-                    shell[g] = count
-                    parity[g] = parity[f] ^ odd[e]
-                    queue[tail] = g
-                    tail += 1
-        count += 1
-    return shell, parity, count
+    if m == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.uint8), 0
+    graph = csr_matrix((np.ones(len(neighbors), np.int8), neighbors, indptr), shape=(m, m))
+    count, label = connected_components(graph, directed=True, connection="weak")
+    _, seeds = np.unique(label, return_index=True)  # lowest face of each component
+    order = np.argsort(seeds, kind="stable")
+    rank = np.empty(count, np.int64)
+    rank[order] = np.arange(count)
+    shell = rank[label]
+    seeds = seeds[order]
+    # the extra node m links to every seed
+    ind2 = np.r_[neighbors, seeds]
+    ptr2 = np.r_[indptr, indptr[-1] + len(seeds)]
+    g2 = csr_matrix((np.ones(len(ind2), np.int8), ind2, ptr2), shape=(m + 1, m + 1))
+    _, pred = breadth_first_order(g2, m, directed=True, return_predecessors=True)
+    pred = pred[:m].astype(np.int64)
+    pred[seeds] = seeds
+    # odd of each tree edge (pred[f], f): the first CSR entry from pred[f] to f
+    src = np.repeat(np.arange(m, dtype=np.int64), np.diff(indptr))
+    key = src * m + neighbors
+    ukey, first = np.unique(key, return_index=True)
+    tree = pred != np.arange(m)
+    bit = np.zeros(m, np.uint8)
+    tk = pred[tree] * m + np.flatnonzero(tree)
+    bit[tree] = odd[first[np.searchsorted(ukey, tk)]]
+    # pointer doubling, O(m log depth): bit[f] is the XOR along the path from f up to (not
+    # including) up[f]; a seed is its own up with bit 0, so the loop ends with every up a seed
+    up = pred
+    while not np.array_equal(up, up[up]):
+        bit = bit ^ bit[up]
+        up = up[up]
+    return shell, bit, int(count)
 
 
 def edge_table(triangles: np.ndarray, vertex_count: int):
@@ -130,7 +147,7 @@ def orient(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     src = np.concatenate([f1, f2])
     dst = np.concatenate([f2, f1])
     oo = np.concatenate([odd, odd])
-    order = np.argsort(src, kind="stable")
+    order = np.lexsort((dst, src))  # neighbours sorted within each face (see _bfs_parity)
     indptr = np.zeros(m + 1, np.int64)
     np.cumsum(np.bincount(src, minlength=m), out=indptr[1:])
     shell, parity, nshells = _bfs_parity(indptr, dst[order], oo[order], m)

@@ -7,23 +7,27 @@ triangles) in the bind pose and on every frame of every clip, expressed in joint
 
 with ``S = skel_transforms(clip.local, parents)`` (``S = bind_transforms`` for the bind pose).
 The points of one part over all poses are skinned by the project's one skinning kernel
-(:mod:`runtime.kernels.skin`) into a ``(F, nv, 3)`` float32 array (one part at a time), and the
+(:mod:`runtime.kernels.skin`) into a ``(F, nv, 3)`` float64 array (one part at a time), and the
 sphere is their exact minimal enclosing sphere (:func:`pipeline.geometry.min_sphere`).
 
 After the centre is rounded to float32, the radius is re-derived from the float64 distance of the
-float64 skinned points (:func:`runtime.kernels.skin.part_farthest`, not the float32 copies) to
-that centre, so containment holds exactly at every sampled pose.
+float64 skinned points to that centre, so containment holds exactly at every sampled pose.
+
+Where a pose shears the joint's transform (a parent's non-uniform scale under a rotated child),
+the radius is multiplied by the largest ratio, over the poses, of that transform's largest
+singular value to its largest axis scale: the contract moves a sphere by the joint transform and
+scales its radius by the largest axis scale, which alone would not cover the sheared ball.
 
 **Between frames.**  The asset's guarantee covers every time in ``[first, last]`` of every clip as
 UsdSkel interpolates it, which ``colossus validate`` certifies with
 :func:`runtime.certify.continuous`.  The same certificate runs here on the clips exactly as the
-writer will store them (translations and rotations float32, scales float16) in ``growth`` mode:
-wherever it cannot hold an interval to the minimal radius it subdivides, down to 2^6 sub-steps,
-and the part's radius becomes the largest bound it reached (``growth`` in the report; 0 for most
-parts).  The validator's adaptive subdivision stops at or before every node this one stopped at
-(its radius is at least the bound there), so the written spheres pass it.  Finally the radius is
-padded by ``SPHERE_PAD_RELATIVE * model size + SPHERE_PAD_RADIUS * radius`` and rounded up to
-float32.
+writer will store them (translations and rotations float32, scales float16) in ``growth`` mode,
+holding each interval to the padded minimal radius (``r (1 + SPHERE_PAD_RADIUS) + SPHERE_PAD_RELATIVE
+* model size``): wherever it cannot, it subdivides, down to 2^6 sub-steps, and the part's radius
+becomes the largest bound it reached (``growth`` in the report, beyond the padded radius; 0 for
+most parts).  The validator's adaptive subdivision stops at or before every node this one stopped
+at (its radius is at least the bound there), so the written spheres pass it.  Finally the radius
+is rounded up to float32.
 
 ``slack_ratio`` compares the sphere with the tightest possible per-pose sphere: the radius over the
 largest per-pose minimal sphere radius of the part's points, computed exactly on the bind pose and
@@ -36,7 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.geometry.minsphere import min_sphere, min_spheres
+from pipeline.geometry.minsphere import largest_min_sphere, min_sphere
 from pipeline.model import SkinnedMesh, Parts, skel_transforms
 from pipeline.stages import StageReport
 from pipeline.tolerances import SPHERE_PAD_RADIUS, SPHERE_PAD_RELATIVE, model_scale
@@ -51,6 +55,9 @@ from runtime.schema import part_vertex_csr
 #: and it keeps the per-pose work bounded on long clips.  The containing sphere itself always
 #: covers every frame.
 SLACK_FRAMES_PER_CLIP = 32
+#: ``tight_radius`` is the largest per-pose minimal radius to within this (relative, below): the
+#: poses of a near-rigid part, whose spheres differ only by rounding, are then solved once.
+TIGHT_REL = 1e-7
 
 
 def pose_transforms(mesh: SkinnedMesh) -> tuple[np.ndarray, list]:
@@ -81,10 +88,15 @@ def slack_pose_indices(mesh: SkinnedMesh, per_clip: int = SLACK_FRAMES_PER_CLIP)
 GROWTH_DEPTH = 6
 
 
-def written_clip(clip, joint_count: int) -> ClipData:
+def written_clip(clip, joint_count: int, roots=None, k: float = 1.0) -> ClipData:
     """A pipeline clip as :class:`runtime.asset.ClipData`, rounded as ``stages.write`` stores it
-    (``decompose_trs``; translations and rotations float32, scales float16)."""
-    t, q, s = decompose_trs(clip.local)
+    (``decompose_trs``; translations and rotations float32, scales float16; the root joints
+    ``roots`` with the skeleton's common scale ``k`` taken out, :func:`pipeline.stages.write.root_scale`)."""
+    local = clip.local
+    if roots is not None and k != 1.0:
+        local = local.copy()
+        local[:, roots, :3, :] /= k
+    t, q, s = decompose_trs(local)
     times = np.asarray(clip.times, dtype=np.float64)
     f64 = (lambda a, dt: np.ascontiguousarray(np.asarray(a, dtype=dt).astype(np.float64)))
     return ClipData(clip.name, clip.name, times, f64(t, np.float32), times, f64(q, np.float32), times,
@@ -119,6 +131,14 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
         raise ValueError("spheres: expected a mesh with parts (run the parts stage first), got parts=None")
     parts_in = mesh.parts
     S, labels = pose_transforms(mesh)
+    # A joint-space ball moved by a sheared joint transform (a parent's non-uniform stretch under a
+    # rotated child) is an ellipsoid whose longest axis is the transform's largest singular
+    # value, more than its largest axis scale, the radius multiplier of the contract: radii (and
+    # the per-pose bounds) are widened by the largest ratio of the two over the poses (1 where no
+    # pose shears).
+    lin = S[..., :3, :3]
+    shear = np.maximum(np.linalg.norm(lin, ord=2, axis=(-2, -1)) / np.linalg.norm(lin, axis=-2).max(-1), 1.0)
+    shear = shear.max(axis=0) * (1.0 + 1e-12)  # (b,)
     to_skel = S @ np.linalg.inv(mesh.bind_transforms)[None] @ mesh.geom_bind  # (F, b, 4, 4)
     inv_S = np.linalg.inv(S)
     G = mesh.geom_bind
@@ -138,24 +158,24 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
         verts = np.unique(mesh.triangles[parts_in.part_faces(p)].ravel())
         pos, ji, jw = pos_all[verts], ji_all[verts], jw_all[verts]
         mats = SK.fold(inv_S[:, j, None] @ to_skel)
-        pts = SK.skin_frames(pos, ji, jw, mats)
+        pts = SK.skin_frames(pos, ji, jw, mats, dtype=np.float64)  # (F, nv, 3) joint space
         center, r = min_sphere(pts.reshape(-1, 3))
-        _, frame_r = min_spheres(pts if len(slack_idx) == len(S) else pts[slack_idx])
-        del pts
+        tight = largest_min_sphere(pts if len(slack_idx) == len(S) else pts[slack_idx], center, rel=TIGHT_REL)
         c32 = center.astype(np.float32)
-        c64 = c32.astype(np.float64)
-        d, _ = SK.part_farthest(pos, ji, jw, mats, [0, len(verts)], np.arange(len(verts)),
-                                np.broadcast_to(c64, (len(S), 1, 3)))
-        pose_far[:, p] = d[:, 0]
-        centers[p], r_min[p] = c32, max(r, float(d.max()))
-        tight = float(frame_r.max())
+        pts -= c32.astype(np.float64)
+        d = np.sqrt(np.einsum("fvi,fvi->fv", pts, pts).max(1))
+        del pts
+        widen = shear[j] if shear[j] > 1.0 + 1e-9 else 1.0
+        pose_far[:, p] = d * widen
+        centers[p], r_min[p] = c32, max(r, float(d.max())) * widen
         details.append({"part": p, "joint": mesh.joint_names[j], "tight_radius": tight, "vertices": int(len(verts))})
 
-    growth = _growth(mesh, parts_in, centers, r_min, pose_far)
+    target = r_min * (1.0 + SPHERE_PAD_RADIUS) + abs_pad  # the padded minimal sphere of the samples
+    need = _between_frames(mesh, parts_in, centers, target, pose_far)
+    growth = np.maximum(need - target, 0.0)
     radii = np.zeros(P, np.float32)
     for p in range(P):
-        need = r_min[p] + growth[p]
-        radii[p] = _round_up_f32(need + abs_pad + SPHERE_PAD_RADIUS * need)
+        radii[p] = _round_up_f32(max(target[p], need[p]))
         tight = details[p]["tight_radius"]
         details[p].update({"radius": float(radii[p]), "center": [float(x) for x in centers[p]],
                            "slack_ratio": float(radii[p]) / tight if tight > 0 else None,
@@ -183,17 +203,25 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     return mesh.replace(parts=new_parts), report
 
 
-def _growth(mesh, parts_in, centers, r_min, pose_far) -> np.ndarray:
-    """(P,) how much each part's radius must grow beyond ``r_min`` for the continuous certificate
-    (:func:`runtime.certify.continuous` in growth mode, on the clips as written)."""
+def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
+    """(P,) the radius each part needs between frames: at most ``target`` where the continuous
+    certificate (:func:`runtime.certify.continuous` in growth mode, on the clips as written)
+    holds every interval to it, else the largest bound it reached at :data:`GROWTH_DEPTH`."""
     P = len(parts_in)
-    growth = np.zeros(P)
+    need = np.zeros(P)
     if not mesh.clips or P == 0:
-        return growth
+        return need
     voff, verts = part_vertex_csr(mesh.triangles, parts_in.face_offsets, parts_in.faces, mesh.vertex_count)
-    rig = certify.Rig(mesh.positions, mesh.joint_indices, mesh.joint_weights, mesh.geom_bind, mesh.bind_transforms,
-                      mesh.rest_transforms, mesh.parents, np.asarray(parts_in.joints), centers.astype(np.float64),
-                      r_min, voff, verts)
+    # the rig exactly as the writer lays it out: the roots' common scale k on the Skeleton prim
+    from .write import root_scale
+    k = root_scale(mesh)
+    roots = mesh.parents < 0
+    unscale = np.diag([1.0 / k, 1.0 / k, 1.0 / k, 1.0])
+    rest = mesh.rest_transforms.copy()
+    rest[roots] = unscale @ rest[roots]
+    rig = certify.Rig(mesh.positions, mesh.joint_indices, mesh.joint_weights, unscale @ mesh.geom_bind,
+                      unscale @ mesh.bind_transforms, rest, mesh.parents, np.asarray(parts_in.joints),
+                      centers.astype(np.float64), target, voff, verts, world=np.diag([k, k, k, 1.0]))
     start = 1  # pose 0 is the bind pose
     for clip in mesh.clips:
         n = clip.frame_count
@@ -201,8 +229,8 @@ def _growth(mesh, parts_in, centers, r_min, pose_far) -> np.ndarray:
         start += n
         if n < 2:
             continue
-        c = certify.continuous(rig, written_clip(clip, mesh.joint_count), clip.times, far, np.ones_like(far, bool),
-                               0.0, 0.0, rho=r_min, growth=True, max_depth=GROWTH_DEPTH, frame_bound_space="joint")
-        need = np.max(np.where(np.isfinite(c.bound), c.bound, 0.0), axis=0)
-        growth = np.maximum(growth, need - r_min)
-    return np.maximum(growth, 0.0)
+        c = certify.continuous(rig, written_clip(clip, mesh.joint_count, roots, k), clip.times, far,
+                               np.ones_like(far, bool), 0.0, 0.0, rho=target, growth=True,
+                               max_depth=GROWTH_DEPTH, frame_bound_space="joint")
+        need = np.maximum(need, np.max(np.where(np.isfinite(c.bound), c.bound, 0.0), axis=0))
+    return need

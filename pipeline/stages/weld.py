@@ -5,6 +5,12 @@ maps that every per-vertex attribute goes through.  The weld key includes the sk
 two vertices at one position with different weights are genuinely different vertices (welding
 them would change the animated shape), so they are kept apart and reported, since such a seam
 tears open in animation.
+
+Two vertices that share a triangle are never merged, however close: split copies of one vertex
+never share a triangle, while a closed mesh may hold genuinely different vertices closer than the
+tolerance, joined by a real edge (metaball-made meshes do); merging them would collapse that edge
+and its faces.  (Bit-identical duplicates in one triangle are still merged: that triangle has no
+area either way.)
 """
 
 from __future__ import annotations
@@ -13,34 +19,10 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
-from numba import njit
 
 from pipeline.model import SkinnedMesh, Parts
 from pipeline.stages import StageReport
 from pipeline.tolerances import WELD_RELATIVE, WELD_WEIGHT, model_scale
-
-
-@njit(cache=True)
-def _canonical(j, w, cj, cw):
-    """Per row: influences with weight > 0 sorted by (joint, weight), then (-1, 0) padding."""
-    n, k = j.shape
-    for v in range(n):
-        c = 0
-        for t in range(k):
-            wt = w[v, t]
-            if wt > 0:  # insertion sort of the live influences
-                jt = np.int64(j[v, t])
-                s = c
-                while s > 0 and (cj[v, s - 1] > jt or (cj[v, s - 1] == jt and cw[v, s - 1] > wt)):
-                    cj[v, s] = cj[v, s - 1]
-                    cw[v, s] = cw[v, s - 1]
-                    s -= 1
-                cj[v, s] = jt
-                cw[v, s] = wt
-                c += 1
-        for t in range(c, k):
-            cj[v, t] = -1
-            cw[v, t] = 0
 
 
 def canonical_influences(joint_indices: np.ndarray, joint_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -58,49 +40,41 @@ def canonical_influences(joint_indices: np.ndarray, joint_weights: np.ndarray) -
     weights : (n, k) float32
         Matching weights, ``0`` padding.
     """
-    j = np.ascontiguousarray(joint_indices, dtype=np.int64)
-    w = np.ascontiguousarray(joint_weights, dtype=np.float32)
-    cj = np.empty(j.shape, np.int64)
-    cw = np.empty(w.shape, np.float32)
-    _canonical(j, w, cj, cw)
-    return cj, cw
+    j = np.asarray(joint_indices, dtype=np.int64)
+    w = np.asarray(joint_weights, dtype=np.float32)
+    live = w > 0
+    # per row: live influences first, by joint then weight (the last key of lexsort is the first)
+    order = np.lexsort((w, np.where(live, j, np.iinfo(np.int64).max)), axis=-1)
+    keep = np.take_along_axis(live, order, -1)
+    cj = np.where(keep, np.take_along_axis(j, order, -1), -1)
+    cw = np.where(keep, np.take_along_axis(w, order, -1), np.float32(0))
+    return np.ascontiguousarray(cj), np.ascontiguousarray(cw, dtype=np.float32)
 
 
-@njit(cache=True)
 def _exact_groups(rows):
-    """Label each row of ``rows`` (n, c) uint32 with the index of the first identical row
-    (open-addressing hash table; expected O(n))."""
+    """Label each row of ``rows`` (n, c) uint32 with the index of the first identical row.
+
+    Rows are hashed to 64 bits (vectorised FNV-1a over the 32-bit words, then a splitmix
+    finaliser) and grouped by sorting the hashes; every row is then compared with its group's
+    first row, and should two different rows ever share a hash the rows themselves are sorted
+    instead (O(n log n) either way)."""
     n, c = rows.shape
-    size = 1
-    while size < 2 * n:
-        size *= 2
-    mask = np.uint64(size - 1)
-    table = np.full(size, -1, np.int64)
-    label = np.empty(n, np.int64)
-    for i in range(n):
-        h = np.uint64(1469598103934665603)
-        for t in range(c):  # FNV-1a over 32-bit words, then a splitmix finaliser
-            h = (h ^ np.uint64(rows[i, t])) * np.uint64(1099511628211)
+    if n == 0:
+        return np.zeros(0, np.int64)
+    with np.errstate(over="ignore"):
+        h = np.full(n, 1469598103934665603, np.uint64)
+        for t in range(c):
+            h = (h ^ rows[:, t].astype(np.uint64)) * np.uint64(1099511628211)
         h ^= h >> np.uint64(31)
         h *= np.uint64(0xBF58476D1CE4E5B9)
         h ^= h >> np.uint64(29)
-        slot = h & mask
-        while True:
-            r = table[slot]
-            if r < 0:
-                table[slot] = i
-                label[i] = i
-                break
-            same = True
-            for t in range(c):
-                if rows[r, t] != rows[i, t]:
-                    same = False
-                    break
-            if same:
-                label[i] = r
-                break
-            slot = (slot + np.uint64(1)) & mask
-    return label
+    _, first, inv = np.unique(h, return_index=True, return_inverse=True)
+    label = first[inv]
+    if not np.array_equal(rows[label], rows):  # a hash collision: group the rows exactly
+        v = np.ascontiguousarray(rows).view(np.dtype((np.void, rows.dtype.itemsize * c))).ravel()
+        _, first, inv = np.unique(v, return_index=True, return_inverse=True)
+        label = first[inv]
+    return label.astype(np.int64)
 
 
 def _row_groups(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -114,7 +88,7 @@ def _row_groups(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def weld_maps(positions: np.ndarray, joint_indices: np.ndarray, joint_weights: np.ndarray,
-              tolerance: float) -> tuple[np.ndarray, np.ndarray, int]:
+              tolerance: float, triangles: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Index maps that merge vertices closer than ``tolerance`` with the same skin influences.
 
     Two vertices are merged when they are within ``tolerance`` (Euclidean) of each other and
@@ -129,6 +103,8 @@ def weld_maps(positions: np.ndarray, joint_indices: np.ndarray, joint_weights: n
     joint_indices : (n, k) int
     joint_weights : (n, k) float
     tolerance : float, >= 0
+    triangles : (m, 3) int, optional
+        When given, two vertices of one triangle never end up merged (unless bit-identical).
 
     Returns
     -------
@@ -172,8 +148,16 @@ def weld_maps(positions: np.ndarray, joint_indices: np.ndarray, joint_weights: n
     a, b = cls_first[pairs[:, 0]], cls_first[pairs[:, 1]]
     same = np.all(cj[a] == cj[b], axis=1) & np.all(np.abs(cw[a] - cw[b]) <= WELD_WEIGHT, axis=1)
     good = pairs[same]
+    edges = None
+    if triangles is not None and len(good):
+        edges = _class_edges(np.asarray(triangles, dtype=np.int64), cls_of, nc)
+        good = good[~np.isin(good[:, 0] * nc + good[:, 1], edges)]  # pairs are (lo, hi)
     graph = coo_matrix((np.ones(len(good), np.int8), (good[:, 0], good[:, 1])), shape=(nc, nc))
     ncomp, comp_of_cls = connected_components(graph, directed=False)
+    if edges is not None and len(edges):
+        lo, hi = edges // nc, edges % nc
+        if np.any(comp_of_cls[lo] == comp_of_cls[hi]):  # merged through a chain of near vertices
+            ncomp, comp_of_cls = _greedy_components(nc, good, lo, hi)
     comp = comp_of_cls[cls_of]
 
     # 3. lowest original index per group, groups in original order (classes are numbered in
@@ -191,6 +175,49 @@ def weld_maps(positions: np.ndarray, joint_indices: np.ndarray, joint_weights: n
     apart = ra != rb
     conflicts = int(len(np.unique(np.concatenate([ra[apart], rb[apart]]))))
     return keep, inverse, conflicts
+
+
+def _class_edges(triangles, cls_of, nc):
+    """Sorted unique ``lo * nc + hi`` keys of the class pairs joined by a triangle edge."""
+    c = cls_of[triangles]
+    e = np.concatenate([c[:, [0, 1]], c[:, [1, 2]], c[:, [0, 2]]])
+    e = e[e[:, 0] != e[:, 1]]
+    e.sort(axis=1)
+    return np.unique(e[:, 0] * nc + e[:, 1])
+
+
+def _greedy_components(nc, pairs, lo, hi):
+    """Union-find over ``pairs`` (in order) that refuses a union joining two classes of one
+    triangle edge (``lo[i]``, ``hi[i]``); only reached when a chain of near vertices would do so."""
+    parent = np.arange(nc)
+    adj = {}
+    for x, y in zip(lo.tolist(), hi.tolist()):
+        adj.setdefault(x, set()).add(y)
+        adj.setdefault(y, set()).add(x)
+
+    def find(x):
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    members = {}
+    for x, y in pairs.tolist():
+        rx, ry = find(x), find(y)
+        if rx == ry:
+            continue
+        mx, my = members.get(rx, [rx]), members.get(ry, [ry])
+        if len(mx) < len(my):
+            rx, ry, mx, my = ry, rx, my, mx
+        ny = set(my)
+        if any(adj.get(v, set()) & ny for v in mx):
+            continue
+        parent[ry] = rx
+        members[rx] = mx + my
+        members.pop(ry, None)
+    roots = np.array([find(x) for x in range(nc)])
+    _, comp = np.unique(roots, return_inverse=True)
+    return int(comp.max()) + 1 if nc else 0, comp
 
 
 def weld(mesh: SkinnedMesh, tolerance: float | None = None) -> tuple[SkinnedMesh, StageReport]:
@@ -211,7 +238,8 @@ def weld(mesh: SkinnedMesh, tolerance: float | None = None) -> tuple[SkinnedMesh
     """
     if tolerance is None:
         tolerance = WELD_RELATIVE * model_scale(mesh.positions)
-    keep, inverse, conflicts = weld_maps(mesh.positions, mesh.joint_indices, mesh.joint_weights, tolerance)
+    keep, inverse, conflicts = weld_maps(mesh.positions, mesh.joint_indices, mesh.joint_weights, tolerance,
+                                         mesh.triangles)
     tris = inverse[mesh.triangles]
     degenerate = (tris[:, 0] == tris[:, 1]) | (tris[:, 1] == tris[:, 2]) | (tris[:, 0] == tris[:, 2])
     kept_faces = ~degenerate

@@ -11,8 +11,9 @@ Layout (``<Name>`` is the source file's stem made a valid identifier)::
                             customData["colossus"] = provenance
     /<Name>/<clip>          SkelAnimation per clip, one time sample per source frame
 
-The file is written to a temporary name in the output directory and renamed into place, so a
-failed import never leaves a partial asset behind.
+The file is written to a temporary name in the output directory, re-opened with usd-core and
+checked (:func:`_check_written`), and only then renamed into place: a failed import never leaves
+a partial asset behind, and nothing usd-core cannot open is ever written.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from runtime import schema
 
 from ..errors import OutputError
 from ..model import SkinnedMesh
-from ..xforms import decompose_trs
+from ..xforms import compose_trs, decompose_trs
 from . import StageReport
 
 OUTPUT_EXTENSIONS = (".usda", ".usdc", ".usd")
@@ -75,6 +76,55 @@ def check_output_path(out_path) -> str:
     return out
 
 
+def root_scale(mesh: SkinnedMesh) -> float:
+    """The uniform scale ``k`` the root joints carry (an armature object's scale, a unit
+    conversion): the median of their axis scales in the bind pose, the rest pose and on every
+    frame of every clip, or 1.0.  Dividing it out is exact; what remains of the roots' scales
+    (1 where the roots carried only ``k``) goes into the animation.
+
+    The writer moves it onto the Skeleton prim (``xformOp:scale``, double precision), out of the
+    SkelAnimation's ``half3`` scales, where it would be rounded (``half(0.01) / 0.01 = 1 + 2.1e-4``).
+    """
+    roots = np.flatnonzero(mesh.parents < 0)
+    if not len(roots):
+        return 1.0
+    mats = [mesh.bind_transforms[roots], mesh.rest_transforms[roots]] + [c.local[:, roots].reshape(-1, 4, 4)
+                                                                         for c in mesh.clips]
+    _, _, s = decompose_trs(np.concatenate(mats))
+    k = float(np.median(s))
+    # float32 sources give the "same" scale to ~1e-7: what is left after dividing by k then rounds
+    # to exactly 1 in half precision
+    if not (np.isfinite(k) and k > 0) or abs(k - 1.0) < 1e-12:
+        return 1.0
+    return k
+
+
+def stored_clips(mesh: SkinnedMesh) -> SkinnedMesh:
+    """``mesh`` with every clip's joint-local transforms as the asset will store them.
+
+    UsdSkel stores each joint's translation as ``float3``, rotation as ``quatf`` and scale as
+    ``half3`` (the SkelAnimation schema's types).  Half precision moves an animated scale by up to
+    ``2**-11`` of itself; the spheres must be computed on the motion the asset really has, so the
+    pipeline rounds the clips the same way before the ``spheres`` stage (``write`` then stores
+    exactly these values).  The roots' common scale (:func:`root_scale`) is taken out first, as
+    the writer does, so it is not rounded.
+    """
+    k = root_scale(mesh)
+    roots = mesh.parents < 0
+    clips = []
+    for c in mesh.clips:
+        local = c.local.copy()
+        local[:, roots, :3, :] /= k
+        t, q, s = decompose_trs(local)
+        t = t.astype(np.float32).astype(np.float64)
+        q = q.astype(np.float32).astype(np.float64)
+        s = s.astype(np.float16).astype(np.float64)
+        out = compose_trs(t, q, s)
+        out[:, roots, :3, :] *= k
+        clips.append(type(c)(c.name, c.times, out))
+    return mesh.replace(clips=tuple(clips))
+
+
 def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
     """Write ``mesh`` (baked, welded, oriented, bound, with parts and spheres) as a USD asset.
 
@@ -97,6 +147,9 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
     out = check_output_path(out_path)
     if mesh.parts is None:
         raise ValueError("write needs a mesh with parts (run the parts and spheres stages)")
+    tcps = float(mesh.time_codes_per_second)
+    if not (np.isfinite(tcps) and tcps > 0):
+        raise ValueError(f"write: timeCodesPerSecond must be a positive number, got {tcps}")
     ext = os.path.splitext(out)[1].lower()
     folder = os.path.dirname(os.path.abspath(out))
     from pxr import Tf
@@ -123,19 +176,37 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         jpaths = joint_paths(mesh.joint_names, mesh.parents)
         skel.CreateJointsAttr(Vt.TokenArray(jpaths))
         skel.CreateJointNamesAttr(Vt.TokenArray(list(mesh.joint_names)))
-        skel.CreateBindTransformsAttr(schema.matrices_to_usd(mesh.bind_transforms))
-        skel.CreateRestTransformsAttr(schema.matrices_to_usd(mesh.rest_transforms))
+        # the roots' common scale goes onto the Skeleton prim in double precision (see root_scale)
+        k = root_scale(mesh)
+        roots = mesh.parents < 0
+        unscale = np.diag([1.0 / k, 1.0 / k, 1.0 / k, 1.0])
+        bind_k = unscale @ mesh.bind_transforms
+        rest_k = mesh.rest_transforms.copy()
+        rest_k[roots] = unscale @ rest_k[roots]
+        if k != 1.0:
+            UsdGeom.Xformable(skel.GetPrim()).AddScaleOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(k, k, k))
+        skel.CreateBindTransformsAttr(schema.matrices_to_usd(bind_k))
+        skel.CreateRestTransformsAttr(schema.matrices_to_usd(rest_k))
 
         # -- clips ---------------------------------------------------------------------------
         taken = set(RESERVED)
         clip_paths = []
+        sampled = {c["name"]: c for c in mesh.source.get("clip_info", [])}
         for clip in mesh.clips:
             name = _ident(clip.name, taken)
             anim = UsdSkel.Animation.Define(stage, root_path.AppendChild(name))
             if name != clip.name:
                 anim.GetPrim().SetCustomDataByKey(schema.CLIP_NAME_KEY, clip.name)
+            if clip.name in sampled:
+                anim.GetPrim().SetCustomDataByKey(schema.CLIP_SOURCE_KEY, _clip_source(sampled[clip.name], mesh))
             anim.CreateJointsAttr(Vt.TokenArray(jpaths))
-            t, q, s = decompose_trs(clip.local)
+            local = clip.local.copy()
+            local[:, roots] = unscale @ local[:, roots]
+            t, q, s = decompose_trs(local)
+            # one hemisphere along time: consumers slerp consecutive samples in float (GfSlerp on
+            # quatf), which is least exact for nearly opposite quaternions it has to flip
+            flip = np.cumsum(np.einsum("fjk,fjk->fj", q[:-1], q[1:]) < 0, axis=0) % 2 == 1
+            q[1:][flip] *= -1
             ta, ra, sa = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr(), anim.CreateScalesAttr()
             qxyzw = np.ascontiguousarray(q, dtype=np.float32)
             for f, code in enumerate(clip.times):
@@ -163,8 +234,9 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         k = mesh.joint_indices.shape[1]
         binding.CreateJointIndicesPrimvar(False, k).Set(Vt.IntArray.FromNumpy(mesh.joint_indices.reshape(-1).astype(np.int32)))
         binding.CreateJointWeightsPrimvar(False, k).Set(Vt.FloatArray.FromNumpy(mesh.joint_weights.reshape(-1).astype(np.float32)))
-        if not np.allclose(mesh.geom_bind, np.eye(4), rtol=0, atol=1e-12):
-            binding.CreateGeomBindTransformAttr(schema.matrices_to_usd(mesh.geom_bind))
+        geom_bind = unscale @ mesh.geom_bind  # points stay where they are; skeleton space is scaled by k
+        if not np.allclose(geom_bind, np.eye(4), rtol=0, atol=1e-12):
+            binding.CreateGeomBindTransformAttr(schema.matrices_to_usd(geom_bind))
         UsdPhysics.CollisionAPI.Apply(geo.GetPrim())
         UsdPhysics.MeshCollisionAPI.Apply(geo.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.none)
 
@@ -177,6 +249,7 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         stage.GetRootLayer().documentation = f"Collider asset written by colossus from {mesh.source.get('file', '?')}"
         stage.GetRootLayer().Save()
         del stage
+        _check_written(tmp, out, root_path, tcps)
         os.replace(tmp, out)
     except OSError as exc:
         _unlink(tmp)
@@ -190,6 +263,50 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
     size = os.path.getsize(out)
     return mesh, StageReport("write", counts={"path": out, "bytes": size, "clips": len(mesh.clips),
                                               "joints": mesh.joint_count, "parts": len(parts)})
+
+
+def _clip_source(info: dict, mesh: SkinnedMesh) -> dict:
+    """How a clip was sampled from its source, for its SkelAnimation's customData."""
+    out = {"sourceName": str(info.get("source_name") or ""), "sourceKeys": int(info["source_keys"]),
+           "interpolation": str(info["interpolation"]), "sampling": str(info["sampling"]),
+           "keysOnGrid": bool(info["keys_on_grid"])}
+    if "error_bound_relative" in info:
+        from ..tolerances import model_scale
+        out["errorBound"] = float(info["error_bound_relative"] * model_scale(mesh.positions))
+        out["errorBoundRelative"] = float(info["error_bound_relative"])
+    return out
+
+
+def _check_written(tmp, out, root_path, tcps) -> None:
+    """Re-open the file just written with usd-core and check what every consumer relies on
+    first (it opens; frame rates positive; the default prim is the SkelRoot), raising
+    :class:`OutputError` before the rename otherwise.
+
+    A text layer is re-read up to its metadata only (where an invalid value such as
+    ``framesPerSecond = -1`` makes usd-core refuse the whole file; parsing 100k points again
+    would double the stage's time); a crate layer opens lazily, so it is opened whole."""
+    from pxr import Sdf, Tf
+
+    text = os.path.splitext(tmp)[1].lower() == ".usda"
+    try:
+        layer = Sdf.Layer.OpenAsAnonymous(tmp, text)
+    except Tf.ErrorException as exc:
+        raise OutputError(f"{out}: usd-core cannot re-open the asset just written ({' '.join(str(exc).split())[:200]})") from None
+    if layer is None:
+        raise OutputError(f"{out}: usd-core cannot re-open the asset just written")
+    problems = []
+    for key in ("timeCodesPerSecond", "framesPerSecond"):
+        v = layer.pseudoRoot.GetInfo(key) if layer.pseudoRoot.HasInfo(key) else None
+        if v is None or not (float(v) > 0) or abs(float(v) - tcps) > 1e-9 * tcps:
+            problems.append(f"{key} is {v}, expected {tcps:g}")
+    if layer.defaultPrim != root_path.name:
+        problems.append(f"defaultPrim is {layer.defaultPrim!r}, expected {root_path.name!r}")
+    elif not text:
+        spec = layer.GetPrimAtPath(root_path)
+        if spec is None or spec.typeName != "SkelRoot":
+            problems.append("the default prim is not a SkelRoot")
+    if problems:
+        raise OutputError(f"{out}: the asset just written is not valid USD ({'; '.join(problems)}); nothing written")
 
 
 def _plain(d):

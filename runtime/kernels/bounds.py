@@ -50,13 +50,13 @@ import numpy as np
 from numba import njit, prange
 
 from .config import FASTMATH_PROOF as _FM
-from .skin import _lbs as _lbs_j
+from .skin import PARALLEL_WORK, skin_frames
 
 #: Relative padding of every bound (float64 rounding of the few dozen operations behind it).
 ROUND = 1e-12
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, fastmath=_FM)
 def _norm2(m):
     """Upper bound of the spectral norm of the 3x3 linear part of a 4x4 ``m`` (see the module
     docstring), padded by :data:`ROUND`."""
@@ -71,7 +71,7 @@ def _norm2(m):
     return math.sqrt(best) * (1.0 + ROUND)
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, fastmath=_FM)
 def _colmax(m):
     """Largest column norm of the 3x3 part of ``m`` (the contract's radius scale)."""
     s = 0.0
@@ -83,46 +83,48 @@ def _colmax(m):
 
 
 @njit(cache=True, fastmath=_FM)
+def _xf(m, x, y, z):
+    """``m @ (x, y, z, 1)`` for a 4x4 (or 3x4) column-vector ``m``: three float64."""
+    return (m[0, 0] * x + m[0, 1] * y + m[0, 2] * z + m[0, 3], m[1, 0] * x + m[1, 1] * y + m[1, 2] * z + m[1, 3],
+            m[2, 0] * x + m[2, 1] * y + m[2, 2] * z + m[2, 3])
+
+
+@njit(cache=True, inline="always", fastmath=_FM)
 def _pose_bound(f, p, world, part_joint, part_centers, part_radii, pj_offsets, pj_joint, pj_center,
-                pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db):
+                pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db, e, E):
     """Part ``p`` at pose ``f``: sphere ``sph[f, p]`` (centre, radius), bounds ``kb[f, p]`` (test
     K) and ``db[f, p]`` (test D; inf when the part has no Pareto set) on the distance of any of
-    its skinned vertices from the centre."""
+    its skinned vertices from the centre.  ``e`` (>= the part's joint count,) and ``E`` (4, 4)
+    are scratch."""
     J = part_joint[p]
-    cx, cy, cz = part_centers[p, 0], part_centers[p, 1], part_centers[p, 2]
-    wx = world[f, J, 0, 0] * cx + world[f, J, 0, 1] * cy + world[f, J, 0, 2] * cz + world[f, J, 0, 3]
-    wy = world[f, J, 1, 0] * cx + world[f, J, 1, 1] * cy + world[f, J, 1, 2] * cz + world[f, J, 1, 3]
-    wz = world[f, J, 2, 0] * cx + world[f, J, 2, 1] * cy + world[f, J, 2, 2] * cz + world[f, J, 2, 3]
+    NJ = world[f, J]
+    wx, wy, wz = _xf(NJ, part_centers[p, 0], part_centers[p, 1], part_centers[p, 2])
     sph[f, p, 0] = wx
     sph[f, p, 1] = wy
     sph[f, p, 2] = wz
-    sph[f, p, 3] = part_radii[p] * _colmax(world[f, J])
+    sph[f, p, 3] = part_radii[p] * _colmax(NJ)
     cnorm = math.sqrt(wx * wx + wy * wy + wz * wz)
-    sJ = _norm2(world[f, J])
+    sJ = _norm2(NJ)
     far = 0.0
     lo, hi = pj_offsets[p], pj_offsets[p + 1]
-    e = np.zeros(hi - lo)
-    E = np.empty((4, 4))
     for i in range(lo, hi):
         b = pj_joint[i]
         ox, oy, oz = pj_center[i, 0], pj_center[i, 1], pj_center[i, 2]
-        x = world[f, b, 0, 0] * ox + world[f, b, 0, 1] * oy + world[f, b, 0, 2] * oz + world[f, b, 0, 3] - wx
-        y = world[f, b, 1, 0] * ox + world[f, b, 1, 1] * oy + world[f, b, 1, 2] * oz + world[f, b, 1, 3] - wy
-        z = world[f, b, 2, 0] * ox + world[f, b, 2, 1] * oy + world[f, b, 2, 2] * oz + world[f, b, 2, 3] - wz
-        d = math.sqrt(x * x + y * y + z * z) + _norm2(world[f, b]) * pj_radius[i]
+        x, y, z = _xf(world[f, b], ox, oy, oz)
+        d = math.sqrt((x - wx) ** 2 + (y - wy) ** 2 + (z - wz) ** 2) + _norm2(world[f, b]) * pj_radius[i]
         if not (d <= far):  # NaN reads as far
             far = d if d == d else np.inf
+        e[i - lo] = 0.0
         if b == J:
             continue
-        # E_b = N_b - N_J X_b (X_b = B_J^-1 B_b)
-        for r in range(3):
+        for r in range(3):  # E_b = N_b - N_J X_b (X_b = B_J^-1 B_b)
             for c in range(4):
-                E[r, c] = world[f, b, r, c] - (world[f, J, r, 0] * pj_rel[i, 0, c] + world[f, J, r, 1] * pj_rel[i, 1, c]
-                                              + world[f, J, r, 2] * pj_rel[i, 2, c] + world[f, J, r, 3] * pj_rel[i, 3, c])
-        ex = E[0, 0] * ox + E[0, 1] * oy + E[0, 2] * oz + E[0, 3]
-        ey = E[1, 0] * ox + E[1, 1] * oy + E[1, 2] * oz + E[1, 3]
-        ez = E[2, 0] * ox + E[2, 1] * oy + E[2, 2] * oz + E[2, 3]
-        e[i - lo] = math.sqrt(ex * ex + ey * ey + ez * ez) + _norm2(E) * pj_radius[i]
+                acc = world[f, b, r, c]
+                for q in range(4):
+                    acc -= NJ[r, q] * pj_rel[i, q, c]
+                E[r, c] = acc
+        x, y, z = _xf(E, ox, oy, oz)
+        e[i - lo] = math.sqrt(x * x + y * y + z * z) + _norm2(E) * pj_radius[i]
     pad = (1.0 + ROUND)
     kb[f, p] = (part_wabs[p] * far + part_wdev[p] * cnorm) * pad
     h0, h1 = h_offsets[p], h_offsets[p + 1]
@@ -133,8 +135,7 @@ def _pose_bound(f, p, world, part_joint, part_centers, part_radii, pj_offsets, p
     dmax = 0.0
     for h in range(h0, h1):
         acc = sJ * h_dist[h]
-        if h_dist[h] > dmax:
-            dmax = h_dist[h]
+        dmax = max(dmax, h_dist[h])
         for i in range(hi - lo):
             acc += h_w[h, i] * e[i]
         if not (acc <= best):
@@ -146,22 +147,25 @@ def _pose_bound(f, p, world, part_joint, part_centers, part_radii, pj_offsets, p
 def _pose_bounds(world, part_joint, part_centers, part_radii, pj_offsets, pj_joint, pj_center, pj_radius,
                  pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db):
     """:func:`_pose_bound` for every (pose, part): world (F, J, 4, 4) joint -> stage; sph
-    (F, P, 4), kb, db (F, P) out."""
+    (F, P, 4), kb, db (F, P) out.  Threaded (large inputs only, see :func:`pose_bounds`)."""
     F, P = world.shape[0], part_joint.shape[0]
     for task in prange(F * P):
         f = task // P
         _pose_bound(f, task - f * P, world, part_joint, part_centers, part_radii, pj_offsets, pj_joint,
-                    pj_center, pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db)
+                    pj_center, pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db,
+                    np.empty(h_w.shape[1]), np.empty((4, 4)))
 
 
 @njit(cache=True, fastmath=_FM)
 def _pose_bounds_serial(world, part_joint, part_centers, part_radii, pj_offsets, pj_joint, pj_center,
                         pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db):
-    """:func:`_pose_bounds` on one thread (one pose: the runtime's per-frame call)."""
+    """:func:`_pose_bounds` on one thread (the runtime's per-frame call, and small proofs)."""
+    e = np.empty(h_w.shape[1])
+    E = np.empty((4, 4))
     for f in range(world.shape[0]):
         for p in range(part_joint.shape[0]):
             _pose_bound(f, p, world, part_joint, part_centers, part_radii, pj_offsets, pj_joint, pj_center,
-                        pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db)
+                        pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db, e, E)
 
 
 # ------------------------------------------------------------------------ precomputed data
@@ -321,8 +325,8 @@ def pose_bounds(world, bd: BoundData, parallel=None):
     sph = np.empty((F, P, 4))
     kb = np.empty((F, P))
     db = np.empty((F, P))
-    if parallel is None:
-        parallel = F * P > 256
+    if parallel is None:  # a (pose, part) pair costs about as much as skinning 4 vertices
+        parallel = F * len(bd.pj_joint) * 16 > PARALLEL_WORK
     (_pose_bounds if parallel else _pose_bounds_serial)(w, *bd.args(), sph, kb, db)
     return sph, kb, db
 
@@ -344,9 +348,59 @@ def _cull_spheres(sph, kb, db, spheres, cull):
 
 
 # ------------------------------------------------------------------ continuous time (chords)
-@njit(cache=True, parallel=True, fastmath=_FM)
-def _chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius,
-                  pair_part, part_centers, e0, e1, delta, lam, pert):
+#: The chord bounds below are numpy over the one skinning kernel (no kernel of their own to
+#: compile on a new user's first import or validation); the chain bounds are a kernel (numpy was
+#: 10x slower on the proof benchmark).
+#: :func:`chord_tasks` handles at most this many (task, vertex, influence) terms at once.
+CHORD_BLOCK = 1 << 14
+
+
+@njit(cache=True, inline="always", fastmath=_FM)
+def _chain_task(i, k, L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert):
+    """Pair ``k`` over interval ``i`` of :func:`_chain_bounds_serial`."""
+    a0x, a0y, a0z = pj_center[k, 0], pj_center[k, 1], pj_center[k, 2]
+    a1x, a1y, a1z = a0x, a0y, a0z
+    r = pj_radius[k]
+    m = math.sqrt(a0x * a0x + a0y * a0y + a0z * a0z) + r
+    v = 0.0
+    a = 0.0
+    lm = 1.0
+    pe = 0.0
+    for s in range(path_off[k], path_off[k + 1]):
+        j = path_j[s]
+        if path_dir[s] > 0:
+            n0, n1, n2 = fw[i, j, 0], fw[i, j, 1], fw[i, j, 2]
+            mz = m
+            vz = v
+            pe = n0 * pe + eps[i, j, 0] * m
+            a0x, a0y, a0z = _xf(L0[i, j], a0x, a0y, a0z)
+            a1x, a1y, a1z = _xf(L1[i, j], a1x, a1y, a1z)
+        else:
+            n0, n1, n2 = iv[i, j, 0], iv[i, j, 1], iv[i, j, 2]
+            zx, zy, zz = a0x - L0[i, j, 0, 3], a0y - L0[i, j, 1, 3], a0z - L0[i, j, 2, 3]
+            wx, wy, wz = a1x - L1[i, j, 0, 3], a1y - L1[i, j, 1, 3], a1z - L1[i, j, 2, 3]
+            mz = max(math.sqrt(zx * zx + zy * zy + zz * zz), math.sqrt(wx * wx + wy * wy + wz * wz)) + a / 8.0 + r * lm
+            vz = v + dt[i, j]
+            pe = n0 * pe + eps[i, j, 1] * mz
+            a0x, a0y, a0z = _xf(Li0[i, j], a0x, a0y, a0z)
+            a1x, a1y, a1z = _xf(Li1[i, j], a1x, a1y, a1z)
+        # forward p = T + F q: |p'| <= dt + n1 m + n0 v, |p''| <= n2 m + 2 n1 v + n0 a;
+        # inverse p = F^-1 (q - T): the same with m -> m_z and v -> v + dt (and no dt term)
+        v, a = n1 * mz + n0 * vz + (dt[i, j] if path_dir[s] > 0 else 0.0), n2 * mz + 2.0 * n1 * vz + n0 * a
+        lm = lm * n0
+        m = max(math.sqrt(a0x * a0x + a0y * a0y + a0z * a0z),
+                math.sqrt(a1x * a1x + a1y * a1y + a1z * a1z)) + a / 8.0 + r * lm
+    p = pair_part[k]
+    cx, cy, cz = part_centers[p, 0], part_centers[p, 1], part_centers[p, 2]
+    e0[i, k] = math.sqrt((a0x - cx) ** 2 + (a0y - cy) ** 2 + (a0z - cz) ** 2)
+    e1[i, k] = math.sqrt((a1x - cx) ** 2 + (a1y - cy) ** 2 + (a1z - cz) ** 2)
+    delta[i, k] = a / 8.0 * (1.0 + 1e-9)
+    lam[i, k] = lm
+    pert[i, k] = pe * (1.0 + 1e-9)
+
+
+@njit(cache=True, fastmath=_FM)
+def _chain_bounds_serial(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert):
     """Deviation-from-chord bounds of every (part, joint) ball over every interval.
 
     For interval ``i`` (normalised time ``tau`` in [0, 1]) and pair ``k`` (part P of joint J,
@@ -378,60 +432,29 @@ def _chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir,
     bounds the distance of every point of the moving ball from its chord for every tau (the
     vector form of the linear-interpolation error, ``|p(tau) - chord| <= tau (1 - tau) / 2 sup
     |p''|``), ``lam`` bounds the norm of A's linear part."""
-    I, M = L0.shape[0], pj_center.shape[0]
-    for task in prange(I * M):
-        i = task // M
-        k = task - i * M
-        a0x, a0y, a0z = pj_center[k, 0], pj_center[k, 1], pj_center[k, 2]
-        a1x, a1y, a1z = a0x, a0y, a0z
-        r = pj_radius[k]
-        m = math.sqrt(a0x * a0x + a0y * a0y + a0z * a0z) + r
-        v = 0.0
-        a = 0.0
-        lm = 1.0
-        pe = 0.0
-        for s in range(path_off[k], path_off[k + 1]):
-            j = path_j[s]
-            if path_dir[s] > 0:
-                n0, n1, n2 = fw[i, j, 0], fw[i, j, 1], fw[i, j, 2]
-                vn = dt[i, j] + n1 * m + n0 * v
-                an = n2 * m + 2.0 * n1 * v + n0 * a
-                pe = n0 * pe + eps[i, j, 0] * m
-                A, Bm = L0, L1
-            else:
-                n0, n1, n2 = iv[i, j, 0], iv[i, j, 1], iv[i, j, 2]
-                zx, zy, zz = a0x - L0[i, j, 0, 3], a0y - L0[i, j, 1, 3], a0z - L0[i, j, 2, 3]
-                wx, wy, wz = a1x - L1[i, j, 0, 3], a1y - L1[i, j, 1, 3], a1z - L1[i, j, 2, 3]
-                mz = max(math.sqrt(zx * zx + zy * zy + zz * zz), math.sqrt(wx * wx + wy * wy + wz * wz)) + a / 8.0 + r * lm
-                vn = n1 * mz + n0 * (v + dt[i, j])
-                an = n2 * mz + 2.0 * n1 * (v + dt[i, j]) + n0 * a
-                pe = n0 * pe + eps[i, j, 1] * mz
-                A, Bm = Li0, Li1
-            x = A[i, j, 0, 0] * a0x + A[i, j, 0, 1] * a0y + A[i, j, 0, 2] * a0z + A[i, j, 0, 3]
-            y = A[i, j, 1, 0] * a0x + A[i, j, 1, 1] * a0y + A[i, j, 1, 2] * a0z + A[i, j, 1, 3]
-            z = A[i, j, 2, 0] * a0x + A[i, j, 2, 1] * a0y + A[i, j, 2, 2] * a0z + A[i, j, 2, 3]
-            a0x, a0y, a0z = x, y, z
-            x = Bm[i, j, 0, 0] * a1x + Bm[i, j, 0, 1] * a1y + Bm[i, j, 0, 2] * a1z + Bm[i, j, 0, 3]
-            y = Bm[i, j, 1, 0] * a1x + Bm[i, j, 1, 1] * a1y + Bm[i, j, 1, 2] * a1z + Bm[i, j, 1, 3]
-            z = Bm[i, j, 2, 0] * a1x + Bm[i, j, 2, 1] * a1y + Bm[i, j, 2, 2] * a1z + Bm[i, j, 2, 3]
-            a1x, a1y, a1z = x, y, z
-            v = vn
-            a = an
-            lm = lm * n0
-            m = max(math.sqrt(a0x * a0x + a0y * a0y + a0z * a0z),
-                    math.sqrt(a1x * a1x + a1y * a1y + a1z * a1z)) + a / 8.0 + r * lm
-        p = pair_part[k]
-        cx, cy, cz = part_centers[p, 0], part_centers[p, 1], part_centers[p, 2]
-        e0[i, k] = math.sqrt((a0x - cx) ** 2 + (a0y - cy) ** 2 + (a0z - cz) ** 2)
-        e1[i, k] = math.sqrt((a1x - cx) ** 2 + (a1y - cy) ** 2 + (a1z - cz) ** 2)
-        delta[i, k] = a / 8.0 * (1.0 + 1e-9)
-        lam[i, k] = lm
-        pert[i, k] = pe * (1.0 + 1e-9)
+    M = pj_center.shape[0]
+    for task in range(L0.shape[0] * M):
+        _chain_task(task // M, task % M, L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert)
 
 
 @njit(cache=True, parallel=True, fastmath=_FM)
-def _chord_tasks(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta,
-                 task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
+def _chain_bounds_parallel(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert):
+    """:func:`_chain_bounds_serial` over threads (large inputs; see :func:`chain_bounds`)."""
+    M = pj_center.shape[0]
+    for task in prange(L0.shape[0] * M):
+        _chain_task(task // M, task % M, L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert)
+
+
+def chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert):
+    """Run :func:`_chain_bounds_serial` (or its threaded twin on large inputs: more than
+    :data:`PARALLEL_WORK` path factors in all)."""
+    work = L0.shape[0] * int(path_off[-1]) if len(path_off) else 0
+    kern = _chain_bounds_parallel if work > PARALLEL_WORK else _chain_bounds_serial
+    kern(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert)
+
+
+def chord_tasks(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale,
+                delta, pert):
     """Per-vertex chord bound of (part, time interval) tasks.
 
     Task ``t``: part ``p = task_part[t]``; the J-space skinning transforms of the interval's two
@@ -443,38 +466,43 @@ def _chord_tasks(points, ji, jw, mats, poff, pverts, centers, task_part, task_a,
     ``U(v) = max(|y_v(a) - c|, |y_v(b) - c|) + sum_i |w_i(v)| (scale delta + pert)[j_i(v)]`` bounds
     ``|y_v(tau) - c|`` on the whole sub-interval (LBS is linear in the joint transforms, so the
     vertex strays from its chord by at most the weighted strays of its copies; the chord stays
-    within the larger end distance).  Out: the largest U and its vertex, the largest end
-    distances and their vertices."""
-    for t in prange(task_part.shape[0]):
-        p = task_part[t]
-        ia, ib, row, sc = task_a[t], task_b[t], task_delta[t], task_scale[t]
-        cx, cy, cz = centers[p, 0], centers[p, 1], centers[p, 2]
-        bu, bd0, bd1 = -1.0, -1.0, -1.0
-        vu, v0, v1 = -1, -1, -1
-        for s in range(poff[p], poff[p + 1]):
-            v = pverts[s]
-            x, y, z = _lbs_j(v, ia, points, ji, jw, mats)
-            d0 = math.sqrt((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2)
-            x, y, z = _lbs_j(v, ib, points, ji, jw, mats)
-            d1 = math.sqrt((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2)
-            dev = 0.0
-            for i in range(ji.shape[1]):
-                w = abs(np.float64(jw[v, i]))
-                if w != 0.0:
-                    dev += w * (sc * delta[row, ji[v, i]] + pert[row, ji[v, i]])
-            u = max(d0, d1) + dev
-            if not (u <= bu):
-                bu = u if u == u else np.inf
-                vu = v
-            if not (d0 <= bd0):
-                bd0 = d0 if d0 == d0 else np.inf
-                v0 = v
-            if not (d1 <= bd1):
-                bd1 = d1 if d1 == d1 else np.inf
-                v1 = v
-        out_u[t] = bu * (1.0 + ROUND)
-        out_vu[t] = vu
-        out_d0[t] = bd0
-        out_v0[t] = v0
-        out_d1[t] = bd1
-        out_v1[t] = v1
+    within the larger end distance).  Returns (T,) arrays: the largest U and its vertex, the largest end
+    distances and their vertices.
+
+    numpy, one part at a time: the part's vertices are skinned at every transform its tasks
+    name by the one skinning kernel (:func:`runtime.kernels.skin.skin_frames`, float64)."""
+    T = len(task_part)
+    out_u, out_d0, out_d1 = np.empty(T), np.empty(T), np.empty(T)
+    out_vu, out_v0, out_v1 = (np.full(T, -1, np.int64) for _ in range(3))
+    for p in np.unique(task_part):
+        t_all = np.flatnonzero(task_part == p)
+        vs = pverts[poff[p]:poff[p + 1]]
+        if len(vs) == 0:  # nothing to hold
+            out_u[t_all], out_d0[t_all], out_d1[t_all] = -1.0, -1.0, -1.0
+            continue
+        step = max(1, CHORD_BLOCK // (len(vs) * ji.shape[1]))
+        for s in range(0, len(t_all), step):
+            _chord_block(t_all[s:s + step], p, vs, points, ji, jw, mats, centers, task_a, task_b, task_delta,
+                         task_scale, delta, pert, out_u, out_vu, out_d0, out_v0, out_d1, out_v1)
+    return out_u, out_vu, out_d0, out_v0, out_d1, out_v1
+
+
+def _chord_block(t, p, vs, points, ji, jw, mats, centers, task_a, task_b, task_delta, task_scale, delta, pert,
+                 out_u, out_vu, out_d0, out_v0, out_d1, out_v1):
+    """:func:`chord_tasks` for the tasks ``t`` of part ``p`` (vertices ``vs``)."""
+    need, inv = np.unique(np.r_[task_a[t], task_b[t]], return_inverse=True)
+    y = skin_frames(points[vs], ji[vs], jw[vs], mats[need], dtype=np.float64)  # (R, n, 3)
+    y -= centers[p]
+    d = np.sqrt(np.einsum("rvi,rvi->rv", y, y))
+    d = np.where(d <= 1e300, d, np.inf)  # NaN reads as far
+    d0, d1 = d[inv[:len(t)]], d[inv[len(t):]]
+    x = task_scale[t, None] * delta[task_delta[t]] + pert[task_delta[t]]  # (n_t, J)
+    w = np.abs(jw[vs].astype(np.float64))
+    dev = np.einsum("tvk,vk->tv", x[:, ji[vs]], w)
+    u = np.maximum(d0, d1) + dev
+    u = np.where(u <= 1e300, u, np.inf)
+    for arr, vals, vout in ((out_u, u, out_vu), (out_d0, d0, out_v0), (out_d1, d1, out_v1)):
+        i = np.argmax(vals, axis=1)
+        arr[t] = vals[np.arange(len(t)), i]
+        vout[t] = vs[i]
+    out_u[t] *= (1.0 + ROUND)

@@ -9,8 +9,8 @@ scales are lerped, rotations are ``GfSlerp``-ed; outside the sampled range the f
 sample is held.  Scales are ``half3``: ``GfLerp`` on them rounds every operation to half
 precision (:func:`_half`), so an in-between scale is within ``3 x 2^-11`` (relative) of the exact
 lerp; the continuous certificate charges that (:func:`runtime.certify.factor_bounds`).  ``GfSlerp`` takes the **shortest arc** (it negates ``q1`` when ``q0 . q1 < 0``)
-and falls back to a linear blend when ``1 - |q0 . q1| <= 1e-5``; :func:`_slerp` does the same and
-normalises (the renormalisation matters on the linear branch only).  The shortest-arc behaviour is
+and falls back to a linear blend when ``1 - |q0 . q1| <= 1e-5`` (the cosine from the float
+components of ``GfQuatf``), which it does not renormalise; :func:`_slerp` does exactly the same.  The shortest-arc behaviour is
 checked against usd-core in ``tests/test_kernels.py``.  A joint-local matrix is ``T R S`` (scale,
 then rotate, then translate: ``UsdSkelMakeTransform``).
 """
@@ -25,21 +25,27 @@ from numba import njit
 from .config import FASTMATH_PROOF as _FM
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _bracket(times, t):
     """Sample index ``i`` and weight ``a`` so the value at ``t`` is ``lerp(v[i], v[i+1], a)``;
-    held (clamped) outside the sampled range, exact on a sample (``a == 0``)."""
+    held (clamped) outside the sampled range, exact on a sample (``a == 0``).  (A binary search
+    written out: ``np.searchsorted`` costs a second of compiling.)"""
     n = times.shape[0]
     if n == 1 or t <= times[0]:
         return 0, 0.0
     if t >= times[n - 1]:
         return n - 1, 0.0
-    i = np.searchsorted(times, t, side="right") - 1
-    a = (t - times[i]) / (times[i + 1] - times[i])
-    return i, a
+    lo, hi = 0, n - 1  # times[lo] < t < times[hi] or t == times[lo]
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if times[mid] <= t:
+            lo = mid
+        else:
+            hi = mid
+    return lo, (t - times[lo]) / (times[lo + 1] - times[lo])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _half(x):
     """``x`` rounded to the nearest IEEE half (ties to even), as ``GfHalf`` stores it (normal
     range; UsdSkel's scales are ``half3``)."""
@@ -50,11 +56,16 @@ def _half(x):
     return np.rint(x / q) * q
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _slerp(q0x, q0y, q0z, q0w, q1x, q1y, q1z, q1w, a):
-    """GfSlerp of two (x, y, z, w) quaternions (shortest arc, linear when nearly parallel),
-    normalised; returns four float64."""
-    cos_t = q0x * q1x + q0y * q1y + q0z * q1z + q0w * q1w
+    """GfSlerp of two (x, y, z, w) quaternions exactly as usd-core interpolates ``quatf`` samples:
+    the cosine from the float components (GfQuatf's float dot), shortest arc, and on the linear
+    branch (``1 - cos <= 1e-5``) a plain lerp that is *not* renormalised (GfSlerp does not, and
+    UsdSkel builds the joint matrix from that slightly short quaternion; renormalising here made
+    the runtime differ from UsdSkel by up to ~5e-6 of a joint's reach); returns four float64."""
+    f32 = np.float32
+    cos_t = np.float64(f32(f32(f32(f32(q0x) * f32(q1x)) + f32(f32(q0y) * f32(q1y))) + f32(f32(q0z) * f32(q1z)))
+                       + f32(f32(q0w) * f32(q1w)))
     sign = 1.0
     if cos_t < 0.0:
         cos_t = -cos_t
@@ -68,21 +79,10 @@ def _slerp(q0x, q0y, q0z, q0w, q1x, q1y, q1z, q1w, a):
         s0 = 1.0 - a
         s1 = a
     s1 *= sign
-    x = s0 * q0x + s1 * q1x
-    y = s0 * q0y + s1 * q1y
-    z = s0 * q0z + s1 * q1z
-    w = s0 * q0w + s1 * q1w
-    n2 = x * x + y * y + z * z + w * w
-    if n2 > 0.0:
-        n = math.sqrt(n2)
-        x /= n
-        y /= n
-        z /= n
-        w /= n
-    return x, y, z, w
+    return s0 * q0x + s1 * q1x, s0 * q0y + s1 * q1y, s0 * q0z + s1 * q1z, s0 * q0w + s1 * q1w
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _trs_matrix(tx, ty, tz, x, y, z, w, sx, sy, sz, m):
     """m (4, 4) = T R S, column-vector (``GfMatrix4d::SetRotate(quat)`` transposed, columns
     scaled)."""
@@ -105,50 +105,54 @@ def _trs_matrix(tx, ty, tz, x, y, z, w, sx, sy, sz, m):
 
 
 @njit(cache=True)
-def _trs_at(t, tt, vt, tr, vr, ts, vs, out_t, out_q, out_s):
-    """Translations (A, 3), rotations (A, 4) and scales (A, 3) of the animated joints at time
-    code ``t``, interpolated as UsdSkel does."""
-    iT, aT = _bracket(tt, t)
-    iR, aR = _bracket(tr, t)
-    iS, aS = _bracket(ts, t)
-    for k in range(out_t.shape[0]):
-        for c in range(3):
-            if aT == 0.0:
-                out_t[k, c] = vt[iT, k, c]
-            else:
-                out_t[k, c] = (1.0 - aT) * vt[iT, k, c] + aT * vt[iT + 1, k, c]
-            if aS == 0.0:
-                out_s[k, c] = vs[iS, k, c]
-            else:  # GfLerp on GfVec3h: every operation rounds to half
-                out_s[k, c] = _half(_half((1.0 - aS) * vs[iS, k, c]) + _half(aS * vs[iS + 1, k, c]))
-        if aR == 0.0:
-            for c in range(4):
-                out_q[k, c] = vr[iR, k, c]
-        else:
-            x, y, z, w = _slerp(vr[iR, k, 0], vr[iR, k, 1], vr[iR, k, 2], vr[iR, k, 3],
-                                vr[iR + 1, k, 0], vr[iR + 1, k, 1], vr[iR + 1, k, 2], vr[iR + 1, k, 3], aR)
-            out_q[k, 0] = x
-            out_q[k, 1] = y
-            out_q[k, 2] = z
-            out_q[k, 3] = w
+def _trs_one(k, iT, aT, iR, aR, iS, aS, vt, vr, vs):
+    """Translation, rotation (x, y, z, w) and scale of animated joint ``k`` between the samples
+    bracketing a time (:func:`_bracket` of each channel's times): ten float64."""
+    if aT == 0.0:
+        tx, ty, tz = vt[iT, k, 0], vt[iT, k, 1], vt[iT, k, 2]
+    else:
+        tx = (1.0 - aT) * vt[iT, k, 0] + aT * vt[iT + 1, k, 0]
+        ty = (1.0 - aT) * vt[iT, k, 1] + aT * vt[iT + 1, k, 1]
+        tz = (1.0 - aT) * vt[iT, k, 2] + aT * vt[iT + 1, k, 2]
+    if aS == 0.0:
+        sx, sy, sz = vs[iS, k, 0], vs[iS, k, 1], vs[iS, k, 2]
+    else:  # GfLerp on GfVec3h: every operation rounds to half
+        sx = _half(_half((1.0 - aS) * vs[iS, k, 0]) + _half(aS * vs[iS + 1, k, 0]))
+        sy = _half(_half((1.0 - aS) * vs[iS, k, 1]) + _half(aS * vs[iS + 1, k, 1]))
+        sz = _half(_half((1.0 - aS) * vs[iS, k, 2]) + _half(aS * vs[iS + 1, k, 2]))
+    if aR == 0.0:
+        x, y, z, w = vr[iR, k, 0], vr[iR, k, 1], vr[iR, k, 2], vr[iR, k, 3]
+    else:
+        x, y, z, w = _slerp(vr[iR, k, 0], vr[iR, k, 1], vr[iR, k, 2], vr[iR, k, 3],
+                            vr[iR + 1, k, 0], vr[iR + 1, k, 1], vr[iR + 1, k, 2], vr[iR + 1, k, 3], aR)
+    return tx, ty, tz, x, y, z, w, sx, sy, sz
 
 
 @njit(cache=True)
-def _locals_at(t, tt, vt, tr, vr, ts, vs, anim_to_skel, rest_local, local):
-    """local (J, 4, 4) = the clip's joint-local transforms at time code ``t`` (joints the clip
-    does not animate keep ``rest_local``)."""
-    local[:] = rest_local
-    A = anim_to_skel.shape[0]
-    tv = np.empty((A, 3))
-    qv = np.empty((A, 4))
-    sv = np.empty((A, 3))
-    _trs_at(t, tt, vt, tr, vr, ts, vs, tv, qv, sv)
-    for k in range(A):
-        _trs_matrix(tv[k, 0], tv[k, 1], tv[k, 2], qv[k, 0], qv[k, 1], qv[k, 2], qv[k, 3],
-                    sv[k, 0], sv[k, 1], sv[k, 2], local[anim_to_skel[k]])
+def _locals_at(times, tt, vt, tr, vr, ts, vs, anim_to_skel, rest_local, local, trs):
+    """The clip's joint-local transforms at each time code ``times[n]`` (T,): ``local[n]``
+    (J, 4, 4) (joints the clip does not animate keep ``rest_local``), and the animated joints'
+    translation, rotation (x, y, z, w) and scale in ``trs[n]`` (A, 10), interpolated as UsdSkel
+    does.  Element loops, no allocation: slice assignment, ``np.empty`` and ``np.searchsorted``
+    would each add compile time to a new user's first call."""
+    for n in range(times.shape[0]):
+        t = times[n]
+        for j in range(local.shape[1]):
+            for r in range(4):
+                for c in range(4):
+                    local[n, j, r, c] = rest_local[j, r, c]
+        iT, aT = _bracket(tt, t)
+        iR, aR = _bracket(tr, t)
+        iS, aS = _bracket(ts, t)
+        for k in range(anim_to_skel.shape[0]):
+            tx, ty, tz, x, y, z, w, sx, sy, sz = _trs_one(k, iT, aT, iR, aR, iS, aS, vt, vr, vs)
+            trs[n, k, 0], trs[n, k, 1], trs[n, k, 2] = tx, ty, tz
+            trs[n, k, 3], trs[n, k, 4], trs[n, k, 5], trs[n, k, 6] = x, y, z, w
+            trs[n, k, 7], trs[n, k, 8], trs[n, k, 9] = sx, sy, sz
+            _trs_matrix(tx, ty, tz, x, y, z, w, sx, sy, sz, local[n, anim_to_skel[k]])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _mul44(a, b, out):
     """out = a @ b for 4x4 (no allocation; ``out`` must not alias ``a`` or ``b``)."""
     for i in range(4):
@@ -169,16 +173,17 @@ def _compose(local, parents, topo_order, inv_bind, geom_bind, local_to_world, sk
     folded (1, J, 12): ``local_to_world @ skin`` in :func:`runtime.kernels.skin.fold` layout.
     """
     J = local.shape[0]
-    tmp = np.empty((4, 4))
     for n in range(J):
         j = topo_order[n]
         p = parents[j]
         if p < 0:
-            skel_out[j] = local[j]
+            for r in range(4):
+                for c in range(4):
+                    skel_out[j, r, c] = local[j, r, c]
         else:
             _mul44(skel_out[p], local[j], skel_out[j])
-        _mul44(skel_out[j], inv_bind[j], tmp)
-        _mul44(tmp, geom_bind, skin_out[j])
+        _mul44(skel_out[j], inv_bind[j], world_out[j])  # world_out[j] as scratch, overwritten below
+        _mul44(world_out[j], geom_bind, skin_out[j])
         _mul44(local_to_world, skel_out[j], world_out[j])
         for r in range(3):
             for c in range(4):
@@ -187,28 +192,28 @@ def _compose(local, parents, topo_order, inv_bind, geom_bind, local_to_world, sk
 
 
 # ------------------------------------------------------------------------ public wrappers
-def locals_at(clip, times, rest_local) -> np.ndarray:
+def locals_at(clip, times, rest_local, trs=False):
     """(T, J, 4, 4) float64 joint-local transforms of ``clip`` (a :class:`runtime.asset.ClipData`)
-    at time codes ``times`` (T,), interpolated as UsdSkel does."""
+    at time codes ``times`` (T,), interpolated as UsdSkel does; with ``trs=True`` also the
+    animated joints' translations (T, A, 3), rotations (T, A, 4) (x, y, z, w) and scales
+    (T, A, 3)."""
     rest = np.ascontiguousarray(rest_local, dtype=np.float64)
-    times = np.atleast_1d(np.asarray(times, dtype=np.float64))
+    times = np.ascontiguousarray(np.atleast_1d(np.asarray(times, dtype=np.float64)))
     out = np.empty((len(times),) + rest.shape)
-    for i, t in enumerate(times):
-        _locals_at(float(t), clip.tt, clip.vt, clip.tr, clip.vr, clip.ts, clip.vs, clip.anim_to_skel, rest, out[i])
-    return out
+    v = np.empty((len(times), len(clip.anim_to_skel), 10))
+    _locals_at(times, clip.tt, clip.vt, clip.tr, clip.vr, clip.ts, clip.vs, clip.anim_to_skel, rest, out, v)
+    return (out, v[..., :3], v[..., 3:7], v[..., 7:]) if trs else out
 
 
 def trs_at(clip, times):
     """Translations (T, A, 3), rotations (T, A, 4) (x, y, z, w) and scales (T, A, 3) of the
     clip's animated joints at ``times``, interpolated as UsdSkel does."""
-    times = np.atleast_1d(np.asarray(times, dtype=np.float64))
-    A = len(clip.anim_to_skel)
-    t = np.empty((len(times), A, 3))
-    q = np.empty((len(times), A, 4))
-    s = np.empty((len(times), A, 3))
-    for i, x in enumerate(times):
-        _trs_at(float(x), clip.tt, clip.vt, clip.tr, clip.vr, clip.ts, clip.vs, t[i], q[i], s[i])
-    return t, q, s
+    return locals_at(clip, times, np.tile(np.eye(4), (_joint_count(clip), 1, 1)), trs=True)[1:]
+
+
+def _joint_count(clip) -> int:
+    a = np.asarray(clip.anim_to_skel)
+    return int(a.max()) + 1 if len(a) else 0
 
 
 def compose(local, parents, topo_order=None) -> np.ndarray:

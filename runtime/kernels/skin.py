@@ -17,8 +17,15 @@ Kernels (private) and their readable numpy reference ``tests/naive.py::naive_lbs
 * ``_lbs(v, f, points, ji, jw, m)``: one vertex (inlined into the loops below);
 * ``_skin_frames`` / ``_skin_frames_serial``: every vertex of every pose into ``(F, n, 3)``;
 * ``_skin_subset``: the vertices ``verts`` of one pose (the runtime's lazy per-part skinning);
-* ``_farthest``: per (pose, part), the part's skinned vertex farthest from a centre, only for
-  the (pose, part) pairs asked for (the frame proof's exact tier).
+* ``_skin_dist2``: squared distances of the skinned vertices from a centre per pose, behind
+  :func:`part_farthest` (per (pose, part), the part's skinned vertex farthest from a centre, only
+  for the pairs asked for: the frame proof's exact tier).
+
+The loop body is ``_lbs`` behind a one-thread driver and a ``prange`` driver; the wrapper picks
+the threaded one only above :data:`PARALLEL_WORK` (numba compiles a kernel on its first call, so
+the threaded driver compiles only for large inputs).  Every kernel is kept small: numba's compile
+time grows with the code and the arguments it types, and a new user's first import, validation
+or game frame pays it.
 
 Fast math: :data:`runtime.kernels.config.FASTMATH_PROOF` everywhere (no nnan/ninf): the same
 kernel serves the proof and the game, so it keeps NaN semantics.
@@ -31,11 +38,17 @@ from numba import njit, prange
 
 from .config import FASTMATH_PROOF as _FM
 
-#: Poses per task of :func:`_farthest`: a vertex is loaded once per block of poses.
-FRAME_BLOCK = 8
+#: The wrappers use the multi-threaded kernels only above this many vertex-influence evaluations
+#: (about 10 ms of one thread): below it one thread is faster than waking a pool (on a busy
+#: machine a parallel launch can cost milliseconds), and the parallel kernels, which take
+#: seconds to compile, are never compiled for the small inputs of a first import, validation or
+#: game frame.
+PARALLEL_WORK = 4_000_000
+#: :func:`part_farthest` skins at most this many vertex-poses at once (a 256 KB temporary).
+FARTHEST_BLOCK = 1 << 15
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, fastmath=_FM)
 def _lbs(v, f, points, ji, jw, m):
     """Skinned position of vertex ``v`` under pose ``f`` of the folded transforms ``m``
     (F, J, 12); returns three float64.  Zero weights are padding (skipped)."""
@@ -72,7 +85,7 @@ def _skin_frames(points, ji, jw, m, out):
 
 @njit(cache=True, fastmath=_FM)
 def _skin_frames_serial(points, ji, jw, m, out):
-    """:func:`_skin_frames` on one thread (small inputs: no thread-pool wake-up)."""
+    """:func:`_skin_frames` on one thread (below :data:`PARALLEL_WORK`)."""
     for f in range(m.shape[0]):
         for v in range(points.shape[0]):
             x, y, z = _lbs(v, f, points, ji, jw, m)
@@ -82,58 +95,25 @@ def _skin_frames_serial(points, ji, jw, m, out):
 
 
 @njit(cache=True, fastmath=_FM)
+def _skin_dist2(points, ji, jw, m, centers, out):
+    """out (F, n) float64 = squared distance of every vertex skinned by pose f of ``m`` from
+    ``centers[f]`` (F, 3): the farthest-vertex search of :func:`part_farthest` without storing
+    the points."""
+    for f in range(m.shape[0]):
+        for v in range(points.shape[0]):
+            x, y, z = _lbs(v, f, points, ji, jw, m)
+            out[f, v] = (x - centers[f, 0]) ** 2 + (y - centers[f, 1]) ** 2 + (z - centers[f, 2]) ** 2
+
+
+@njit(cache=True, fastmath=_FM)
 def _skin_subset(verts, lo, hi, points, ji, jw, m, out):
     """out[verts[i]] (n, 3) float32 for ``lo <= i < hi``: vertices skinned by pose 0 of ``m``."""
     for i in range(lo, hi):
-        v = verts[i]
+        v = np.int64(verts[i])
         x, y, z = _lbs(v, 0, points, ji, jw, m)
         out[v, 0] = x
         out[v, 1] = y
         out[v, 2] = z
-
-
-@njit(cache=True, parallel=True, fastmath=_FM)
-def _farthest(points, ji, jw, m, poff, pverts, centers, todo, out_d, out_v):
-    """For every (pose f, part p) with ``todo[f, p]``: the largest distance from ``centers[f, p]``
-    (F, P, 3) to a skinned vertex of part p (CSR ``poff`` / ``pverts``) into ``out_d[f, p]``
-    (inf when a skinned point is NaN or inf; 0 for an empty part) and its vertex into
-    ``out_v[f, p]`` (-1 for an empty part).  Pairs not to do are left untouched.
-
-    Tasks are (part, block of :data:`FRAME_BLOCK` poses): a vertex is read once and skinned for
-    every pose of the block that is to do."""
-    F, P = m.shape[0], poff.shape[0] - 1
-    nb = (F + FRAME_BLOCK - 1) // FRAME_BLOCK
-    for task in prange(P * nb):
-        p = task // nb
-        f0 = (task % nb) * FRAME_BLOCK
-        f1 = min(F, f0 + FRAME_BLOCK)
-        any_todo = False
-        for f in range(f0, f1):
-            if todo[f, p]:
-                any_todo = True
-        if not any_todo:
-            continue
-        best = np.full(FRAME_BLOCK, -1.0)
-        bestv = np.full(FRAME_BLOCK, -1, dtype=np.int32)
-        for s in range(poff[p], poff[p + 1]):
-            v = pverts[s]
-            for f in range(f0, f1):
-                if not todo[f, p]:
-                    continue
-                x, y, z = _lbs(v, f, points, ji, jw, m)
-                dx = x - centers[f, p, 0]
-                dy = y - centers[f, p, 1]
-                dz = z - centers[f, p, 2]
-                d2 = dx * dx + dy * dy + dz * dz
-                if not (d2 <= 1e300):  # NaN or inf: as far as it gets
-                    d2 = np.inf
-                if d2 > best[f - f0]:
-                    best[f - f0] = d2
-                    bestv[f - f0] = v
-        for f in range(f0, f1):
-            if todo[f, p]:
-                out_d[f, p] = np.sqrt(best[f - f0]) if best[f - f0] >= 0.0 else 0.0
-                out_v[f, p] = bestv[f - f0]
 
 
 # ------------------------------------------------------------------------ public wrappers
@@ -171,7 +151,7 @@ def check_skin_inputs(points, joint_indices, joint_weights, joint_count: int):
     return pts, ji, jw
 
 
-def skin_frames(points, joint_indices, joint_weights, skin_xforms, out=None) -> np.ndarray:
+def skin_frames(points, joint_indices, joint_weights, skin_xforms, out=None, dtype=np.float32) -> np.ndarray:
     """Linear-blend skinning of ``F`` poses (compiled; parallel above 20,000 vertex-poses).
 
     Parameters
@@ -180,20 +160,25 @@ def skin_frames(points, joint_indices, joint_weights, skin_xforms, out=None) -> 
     joint_indices : (n, k) int, joint_weights : (n, k) float32
     skin_xforms : (F, J, 4, 4) or (J, 4, 4) float64 column-vector skinning transforms (or
         already folded ``(F, J, 12)``)
-    out : (F, n, 3) float32, optional
+    out : (F, n, 3) ``dtype``, optional
+    dtype : float32 (the default: the runtime's and the asset's points) or float64 (the exact
+        float64 skinned points, as the spheres stage measures them)
 
     Returns
     -------
-    (F, n, 3) float32: ``sum_k w[v,k] * skin_xforms[f, j[v,k]] @ (p[v], 1)``.
+    (F, n, 3) ``dtype``: ``sum_k w[v,k] * skin_xforms[f, j[v,k]] @ (p[v], 1)``.
     """
     m = _folded(skin_xforms)
     pts, ji, jw = check_skin_inputs(points, joint_indices, joint_weights, m.shape[1])
     shape = (m.shape[0], len(pts), 3)
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise ValueError(f"dtype: expected float32 or float64, got {dtype}")
     if out is None:
-        out = np.empty(shape, dtype=np.float32)
-    elif out.shape != shape or out.dtype != np.float32 or not out.flags.c_contiguous:
-        raise ValueError(f"out: expected C-contiguous float32 {shape}, got {out.dtype} {out.shape}")
-    (_skin_frames if shape[0] * shape[1] > 20_000 else _skin_frames_serial)(pts, ji, jw, m, out)
+        out = np.empty(shape, dtype=dtype)
+    elif out.shape != shape or out.dtype != dtype or not out.flags.c_contiguous:
+        raise ValueError(f"out: expected C-contiguous {dtype} {shape}, got {out.dtype} {out.shape}")
+    _skin(pts, ji, jw, m, out)
     return out
 
 
@@ -232,9 +217,29 @@ def part_farthest(points, joint_indices, joint_weights, skin_xforms, part_offset
         raise ValueError(f"todo: expected ({F}, {P}), got {t.shape}")
     d = np.full((F, P), np.nan)
     v = np.full((F, P), -1, dtype=np.int32)
-    if F and P:
-        _farthest(pts, ji, jw, m, poff, pv, c, t, d, v)
+    for p in np.flatnonzero(t.any(0)) if F else ():
+        todo_f = np.flatnonzero(t[:, p])
+        vs = pv[poff[p]:poff[p + 1]]
+        if len(vs) == 0:
+            d[todo_f, p] = 0.0
+            continue
+        args = (pts[vs], ji[vs], jw[vs])
+        step = max(1, FARTHEST_BLOCK // len(vs))  # poses per pass: bounded temporaries
+        for s in range(0, len(todo_f), step):
+            frames = todo_f[s:s + step]
+            d2 = np.empty((len(frames), len(vs)))
+            _skin_dist2(*args, np.ascontiguousarray(m[frames]), np.ascontiguousarray(c[frames, p]), d2)
+            d2[~(d2 <= 1e300)] = np.inf  # NaN or inf: as far as it gets
+            i = np.argmax(d2, axis=1)
+            d[frames, p] = np.sqrt(d2[np.arange(len(frames)), i])
+            v[frames, p] = vs[i]
     return d, v
+
+
+def _skin(pts, ji, jw, m, out):
+    """The one-thread or the threaded kernel, by the size of the job (inputs already checked)."""
+    work = out.shape[0] * out.shape[1] * ji.shape[1]
+    (_skin_frames if work > PARALLEL_WORK else _skin_frames_serial)(pts, ji, jw, m, out)
 
 
 def _folded(x):

@@ -1,0 +1,397 @@
+"""Reader for glTF 2.0 (``.gltf`` with embedded or external buffers, ``.glb``), from the specification.
+
+Read directly rather than through assimp because what a collider needs from glTF is exactly what
+assimp does not hand over: each animation sampler's interpolation (LINEAR, STEP, CUBICSPLINE)
+and its raw key times in seconds, the morph targets, several skins, and the node each mesh hangs
+from.  The file becomes a :class:`~pipeline.readers.scene.Scene`; :func:`~pipeline.readers.scene.build`
+does the rest (joints, rigid meshes, the frame grid).
+
+Followed from the glTF 2.0 specification (https://registry.khronos.org/glTF/specs/2.0/glTF-2.0.html):
+
+* accessors: ``byteOffset``/``byteStride``, ``normalized`` integer types, ``sparse`` substitution;
+* nodes: ``matrix`` (column-major) or ``translation``/``rotation`` (x, y, z, w)/``scale``;
+* skins: ``joints`` and ``inverseBindMatrices`` (identity when absent); a skinned mesh ignores its
+  node's transform (section "Skins"), so its mesh-to-world transform at bind time is identity;
+  ``JOINTS_n``/``WEIGHTS_n`` sets, all of them;
+* primitives: TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN (points and lines carry no surface);
+* animations: ``translation``/``rotation``/``scale`` channels (``weights`` channels drive morph
+  targets, which the collider does not carry), times in seconds.
+
+Y-up metres by specification.  Files this reader refuses say why in one line: not version 2.0,
+a required extension (mesh compression), a pre-release draft (``jointNames``), bad accessors.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import struct
+
+import numpy as np
+
+from ..errors import InputError
+from ..xforms import compose_trs
+from .common import AllocationBudget, check_finite, check_input_file
+from .scene import Animation, Channel, Scene, SceneMesh, Skin, build
+
+_COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
+_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_PATHS = {"translation": "t", "rotation": "r", "scale": "s"}
+#: Extensions whose absence would misread geometry: refused when a file requires them.
+_SUPPORTED_REQUIRED = {"KHR_materials_unlit", "KHR_texture_transform", "KHR_materials_pbrSpecularGlossiness",
+                       "KHR_texture_basisu", "EXT_texture_webp", "KHR_materials_emissive_strength"}
+
+
+class _File:
+    """The JSON and the buffers of one glTF file, with checked accessor decoding."""
+
+    def __init__(self, path):
+        self.path = path
+        with open(path, "rb") as fh:
+            data = fh.read()
+        bin_chunk = None
+        if data[:4] == b"glTF":
+            if len(data) < 20:
+                raise InputError(path, "GLB header is truncated")
+            version, length = struct.unpack_from("<II", data, 4)
+            if version != 2:
+                raise InputError(path, f"GLB container version {version} is not supported (2 only)")
+            pos, chunks = 12, []
+            while pos + 8 <= min(length, len(data)):
+                clen, ctype = struct.unpack_from("<II", data, pos)
+                chunks.append((ctype, data[pos + 8:pos + 8 + clen]))
+                pos += 8 + clen + (-clen % 4)
+            js = [c for t, c in chunks if t == 0x4E4F534A]
+            if not js:
+                raise InputError(path, "GLB has no JSON chunk")
+            text = js[0]
+            bins = [c for t, c in chunks if t == 0x004E4942]
+            bin_chunk = bins[0] if bins else None
+        else:
+            text = data
+        try:
+            self.j = json.loads(text.decode("utf-8-sig") if isinstance(text, bytes) else text)
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise InputError(path, f"not a readable glTF file: JSON does not parse ({exc})") from None
+        if not isinstance(self.j, dict):
+            raise InputError(path, "not a readable glTF file: the JSON is not an object")
+        version = str((self.j.get("asset") or {}).get("version", ""))
+        if not version.startswith("2."):
+            raise InputError(path, f"glTF version {version or '(none)'} is not supported (2.0 only)")
+        need = set(self.j.get("extensionsRequired") or []) - _SUPPORTED_REQUIRED
+        if need:
+            raise InputError(path, f"requires glTF extension(s) this reader does not support: {', '.join(sorted(need))}")
+        self.buffers = []
+        for i, b in enumerate(self.j.get("buffers") or []):
+            uri = b.get("uri")
+            if uri is None:
+                if bin_chunk is None:
+                    raise InputError(path, f"buffer {i} has no uri and the file has no binary chunk")
+                raw = bin_chunk
+            elif uri.startswith("data:"):
+                try:
+                    raw = base64.b64decode(uri.split(",", 1)[1])
+                except (IndexError, ValueError):
+                    raise InputError(path, f"buffer {i}: data URI is not valid base64") from None
+            else:
+                from urllib.parse import unquote
+                ext_path = os.path.join(os.path.dirname(os.path.abspath(path)), unquote(uri))
+                try:
+                    with open(ext_path, "rb") as fh:
+                        raw = fh.read()
+                except OSError:
+                    raise InputError(path, f"buffer {i}: external file {uri!r} cannot be read") from None
+            if len(raw) < int(b.get("byteLength", 0)):
+                raise InputError(path, f"buffer {i} holds {len(raw)} bytes, byteLength says {b.get('byteLength')}")
+            self.buffers.append(raw)
+
+    def list(self, key):
+        v = self.j.get(key) or []
+        if not isinstance(v, list):
+            raise InputError(self.path, f"'{key}' is not a list")
+        return v
+
+    def item(self, key, i, what):
+        arr = self.list(key)
+        if not isinstance(i, int) or not 0 <= i < len(arr):
+            raise InputError(self.path, f"{what}: {key} index {i!r} out of range ({len(arr)} {key})")
+        return arr[i]
+
+    def _view(self, bv_index, dtype, width, count, offset, what):
+        bv = self.item("bufferViews", bv_index, what)
+        buf = self.buffers[bv.get("buffer", 0)] if 0 <= bv.get("buffer", 0) < len(self.buffers) else None
+        if buf is None:
+            raise InputError(self.path, f"{what}: buffer view {bv_index} names a missing buffer")
+        item = np.dtype(dtype).itemsize * width
+        stride = bv.get("byteStride") or item
+        start = bv.get("byteOffset", 0) + offset
+        end = start + (stride * (count - 1) + item if count else 0)
+        if end > bv.get("byteOffset", 0) + bv.get("byteLength", 0) or end > len(buf):
+            raise InputError(self.path, f"{what}: accessor reads past the end of its buffer view")
+        if count == 0:
+            return np.zeros((0, width), dtype)
+        raw = np.frombuffer(buf, dtype=np.uint8, count=end - start, offset=start)
+        if stride == item:
+            return raw.view(dtype).reshape(count, width).copy()
+        rows = np.lib.stride_tricks.as_strided(raw, shape=(count, item), strides=(stride, 1))
+        return np.ascontiguousarray(rows).view(dtype).reshape(count, width)
+
+    def accessor(self, i, what) -> np.ndarray:
+        """Accessor ``i`` as ``(count, width)`` float64 (normalized integers mapped to [0, 1] /
+        [-1, 1]) or the integer type for unnormalized integers."""
+        a = self.item("accessors", i, what)
+        try:
+            dtype = _COMPONENT[a["componentType"]]
+            width = _WIDTH[a["type"]]
+            count = int(a["count"])
+        except KeyError as exc:
+            raise InputError(self.path, f"{what}: accessor {i} has a bad or missing {exc}") from None
+        if "bufferView" in a:
+            out = self._view(a["bufferView"], dtype, width, count, a.get("byteOffset", 0), what)
+        else:
+            out = np.zeros((count, width), dtype)
+        sp = a.get("sparse")
+        if sp:
+            n = int(sp["count"])
+            idx = self._view(sp["indices"]["bufferView"], _COMPONENT[sp["indices"]["componentType"]], 1, n,
+                             sp["indices"].get("byteOffset", 0), what)[:, 0].astype(np.int64)
+            val = self._view(sp["values"]["bufferView"], dtype, width, n, sp["values"].get("byteOffset", 0), what)
+            if len(idx) and (idx.max() >= count or idx.min() < 0):
+                raise InputError(self.path, f"{what}: sparse accessor {i} index out of range")
+            out = out.copy()
+            out[idx] = val
+        if a.get("normalized") and dtype != np.float32:
+            info = np.iinfo(dtype)
+            f = out.astype(np.float64) / info.max
+            return np.maximum(f, -1.0) if info.min < 0 else f
+        return out.astype(np.float64) if dtype == np.float32 else out
+
+
+def _node_matrix(n) -> np.ndarray:
+    if "matrix" in n:
+        m = np.array(n["matrix"], dtype=np.float64)
+        if m.shape != (16,):
+            raise ValueError("matrix must have 16 numbers")
+        return m.reshape(4, 4).T  # column-major in the file
+    t = np.array(n.get("translation", [0, 0, 0]), dtype=np.float64)
+    r = np.array(n.get("rotation", [0, 0, 0, 1]), dtype=np.float64)
+    s = np.array(n.get("scale", [1, 1, 1]), dtype=np.float64)
+    if t.shape != (3,) or r.shape != (4,) or s.shape != (3,):
+        raise ValueError("translation/rotation/scale have the wrong length")
+    nr = np.linalg.norm(r)
+    return compose_trs(t, r / nr if nr > 0 else np.array([0, 0, 0, 1.0]), s)
+
+
+def _triangles(mode, idx, path, what):
+    idx = idx.reshape(-1).astype(np.int64)
+    if mode == 4:
+        return idx[: len(idx) // 3 * 3].reshape(-1, 3)
+    if mode == 5:  # strip: alternate winding so every triangle keeps the strip's orientation
+        if len(idx) < 3:
+            return np.zeros((0, 3), np.int64)
+        i = np.arange(len(idx) - 2)
+        a, b, c = idx[i], idx[i + 1], idx[i + 2]
+        odd = i % 2 == 1
+        return np.stack([np.where(odd, b, a), np.where(odd, a, b), c], axis=1)
+    if mode == 6:
+        if len(idx) < 3:
+            return np.zeros((0, 3), np.int64)
+        i = np.arange(1, len(idx) - 1)
+        return np.stack([np.full(len(i), idx[0]), idx[i], idx[i + 1]], axis=1)
+    return None  # points / lines: no surface
+
+
+def read_scene(path, budget: AllocationBudget) -> Scene:
+    """Read a glTF 2.0 file into a :class:`Scene` (no joint or mesh choice made yet)."""
+    g = _File(path)
+    nodes = g.list("nodes")
+    k = len(nodes)
+    for i, s in enumerate(g.list("skins")):
+        if "joints" not in s:
+            extra = " (it has 'jointNames': a pre-release glTF 2.0 draft)" if "jointNames" in s else ""
+            raise InputError(path, f"skin {i} has no 'joints'{extra}")
+    # parents, then a parents-first order
+    parent = np.full(k, -1, dtype=np.int64)
+    for i, n in enumerate(nodes):
+        for c in n.get("children", []) or []:
+            if not isinstance(c, int) or not 0 <= c < k or c == i:
+                raise InputError(path, f"node {i}: child {c!r} out of range")
+            if parent[c] >= 0:
+                raise InputError(path, f"node {c} has two parents ({parent[c]} and {i})")
+            parent[c] = i
+    order = []
+    stack = [i for i in range(k) if parent[i] < 0][::-1]
+    while stack:
+        i = stack.pop()
+        order.append(i)
+        stack.extend(reversed([c for c in nodes[i].get("children", []) or []]))
+    if len(order) != k:
+        raise InputError(path, "the node hierarchy has a cycle")
+    new = np.empty(k, dtype=np.int64)
+    new[order] = np.arange(k)
+    parents = np.array([-1 if parent[i] < 0 else new[parent[i]] for i in order], dtype=np.int64)
+    names = []
+    seen = {}
+    for i in order:
+        nm = str(nodes[i].get("name") or f"node_{i}")
+        names.append(nm)
+        seen[nm] = seen.get(nm, 0) + 1
+    try:
+        local = np.array([_node_matrix(nodes[i]) for i in order]) if k else np.zeros((0, 4, 4))
+    except (ValueError, TypeError) as exc:
+        raise InputError(path, f"a node has a bad transform: {exc}") from None
+    check_finite(path, "node transforms", local.reshape(k, 16))
+    world = np.empty_like(local)
+    for q, p in enumerate(parents):
+        world[q] = local[q] if p < 0 else world[p] @ local[q]
+
+    # ---- skins and meshes -----------------------------------------------------------------
+    skins = []
+    for i, s in enumerate(g.list("skins")):
+        joints = s["joints"]
+        if not isinstance(joints, list) or any(not isinstance(j, int) or not 0 <= j < k for j in joints):
+            raise InputError(path, f"skin {i}: a joint index is out of range for {k} nodes")
+        if "inverseBindMatrices" in s:
+            ibm = g.accessor(s["inverseBindMatrices"], f"skin {i} inverseBindMatrices").astype(np.float64)
+            if ibm.shape != (len(joints), 16):
+                raise InputError(path, f"skin {i}: {len(ibm)} inverse bind matrices for {len(joints)} joints")
+            ibm = ibm.reshape(-1, 4, 4).transpose(0, 2, 1)
+            check_finite(path, f"skin {i} inverse bind matrices", ibm.reshape(len(joints), 16))
+        else:
+            ibm = np.tile(np.eye(4), (len(joints), 1, 1))
+        skins.append((np.array([new[j] for j in joints], dtype=np.int64), ibm))
+    meshes = []
+    gl_meshes = g.list("meshes")
+    for ni in order:
+        n = nodes[ni]
+        if "mesh" not in n:
+            continue
+        mi = n["mesh"]
+        gm = g.item("meshes", mi, f"node {ni}")
+        mname = str(gm.get("name") or f"mesh_{mi}")
+        skin = None
+        if "skin" in n:
+            if not isinstance(n["skin"], int) or not 0 <= n["skin"] < len(skins):
+                raise InputError(path, f"node {ni}: skin {n['skin']!r} out of range")
+            skin = skins[n["skin"]]
+        for pi, prim in enumerate(gm.get("primitives") or []):
+            what = f"mesh {mname!r} primitive {pi}"
+            attrs = prim.get("attributes") or {}
+            if "POSITION" not in attrs:
+                continue
+            pos = g.accessor(attrs["POSITION"], what + " POSITION").astype(np.float64)
+            nv = len(pos)
+            budget.claim(nv * 200, f"{what} ({nv} vertices)")
+            if pos.shape[1] != 3:
+                raise InputError(path, f"{what}: POSITION is not VEC3")
+            check_finite(path, f"{what} positions", pos)
+            idx = (g.accessor(prim["indices"], what + " indices") if "indices" in prim
+                   else np.arange(nv, dtype=np.int64))
+            if np.issubdtype(np.asarray(idx).dtype, np.floating):
+                raise InputError(path, f"{what}: indices are not integers")
+            tri = _triangles(prim.get("mode", 4), np.asarray(idx), path, what)
+            if tri is None:
+                continue
+            budget.claim(len(tri) * 40, f"{what} faces")
+            if len(tri) and (tri.max() >= nv or tri.min() < 0):
+                raise InputError(path, f"{what}: index {int(tri.max())} out of range for {nv} vertices")
+            sk = None
+            if skin is not None:
+                sets = sorted(int(a.split("_")[1]) for a in attrs if a.startswith("JOINTS_") and a.split("_")[1].isdigit())
+                vv, jj, ww = [], [], []
+                for s_ in sets:
+                    if f"WEIGHTS_{s_}" not in attrs:
+                        continue
+                    j = g.accessor(attrs[f"JOINTS_{s_}"], f"{what} JOINTS_{s_}")
+                    w = g.accessor(attrs[f"WEIGHTS_{s_}"], f"{what} WEIGHTS_{s_}").astype(np.float64)
+                    if j.shape != (nv, 4) or w.shape != (nv, 4):
+                        raise InputError(path, f"{what}: JOINTS_{s_}/WEIGHTS_{s_} are not {nv} x VEC4")
+                    check_finite(path, f"{what} weights", w)
+                    if w.min() < 0:
+                        raise InputError(path, f"{what}: negative skin weights")
+                    j = j.astype(np.int64)
+                    live = w > 0
+                    if np.any(j[live] >= len(skin[0])) or np.any(j[live] < 0):
+                        raise InputError(path, f"{what}: joint index out of range for its skin's {len(skin[0])} joints")
+                    vv.append(np.broadcast_to(np.arange(nv)[:, None], (nv, 4))[live])
+                    jj.append(j[live])
+                    ww.append(w[live])
+                if vv:
+                    sk = Skin(skin[0], skin[1], [names[x] for x in skin[0]], np.concatenate(vv),
+                              np.concatenate(jj), np.concatenate(ww))
+            meshes.append(SceneMesh(
+                name=mname, node=int(new[ni]), positions=pos, triangles=tri,
+                to_world=np.eye(4) if sk is not None else world[new[ni]], skin=sk,
+                morph_targets=len(prim.get("targets") or [])))
+
+    # ---- animations -----------------------------------------------------------------------
+    anims = []
+    for ai, a in enumerate(g.list("animations")):
+        samplers = a.get("samplers") or []
+        chans = []
+        for ci, ch in enumerate(a.get("channels") or []):
+            tgt = ch.get("target") or {}
+            p = _PATHS.get(tgt.get("path"))
+            if p is None or "node" not in tgt:
+                continue  # morph weights / extension paths: not part of the skeleton's motion
+            node = tgt["node"]
+            if not isinstance(node, int) or not 0 <= node < k:
+                raise InputError(path, f"animation {ai} channel {ci}: node {node!r} out of range")
+            si = ch.get("sampler")
+            if not isinstance(si, int) or not 0 <= si < len(samplers):
+                raise InputError(path, f"animation {ai} channel {ci}: sampler {si!r} out of range")
+            smp = samplers[si]
+            interp = smp.get("interpolation", "LINEAR")
+            if interp not in ("LINEAR", "STEP", "CUBICSPLINE"):
+                raise InputError(path, f"animation {ai}: unknown interpolation {interp!r}")
+            what = f"animation {ai} channel {ci}"
+            t = g.accessor(smp["input"], what + " input").astype(np.float64).reshape(-1)
+            v = g.accessor(smp["output"], what + " output").astype(np.float64)
+            width = 4 if p == "r" else 3
+            if v.shape[1] != width:
+                raise InputError(path, f"{what}: output has {v.shape[1]} components, expected {width}")
+            check_finite(path, f"{what} key times", t[:, None])
+            check_finite(path, f"{what} key values", v)
+            if len(t) > 1 and np.any(np.diff(t) <= 0):
+                raise InputError(path, f"{what}: key times are not strictly increasing")
+            if interp == "CUBICSPLINE":
+                if len(v) != 3 * len(t):
+                    raise InputError(path, f"{what}: CUBICSPLINE output has {len(v)} values for {len(t)} keys (expected 3 per key)")
+                v = v.reshape(len(t), 3, width)
+            elif len(v) != len(t):
+                raise InputError(path, f"{what}: {len(t)} key times but {len(v)} values")
+            if p == "r":
+                vals = v[:, 1] if interp == "CUBICSPLINE" else v
+                nrm = np.linalg.norm(vals, axis=-1)
+                if np.any(nrm < 1e-12):
+                    raise InputError(path, f"{what}: a zero rotation quaternion")
+                if interp != "CUBICSPLINE":
+                    v = v / nrm[:, None]
+            if len(t):
+                chans.append(Channel(int(new[node]), p, t, v, interp))
+        anims.append(Animation(str(a.get("name") or ""), chans))
+    return Scene(names=names, parents=parents, local=local, meshes=meshes, animations=anims,
+                 sampling_note="glTF samplers read from the file")
+
+
+def read_gltf(path, meshes=None, fps=None):
+    """Read a glTF 2.0 file into a :class:`~pipeline.model.SkinnedMesh` (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or PathLike
+    meshes : list of str, optional
+        glTF mesh names to take; default every skinned mesh and every mesh parented to a joint.
+    fps : float, optional
+        Frame grid rate; default the file's own (the rate every key falls on), else 30.
+    """
+    path = os.fspath(path)
+    size = check_input_file(path)
+    budget = AllocationBudget(path, size)
+    ext = os.path.splitext(path)[1].lower()
+    scene = read_scene(path, budget)
+    mesh = build(scene, path, meshes=meshes, fps=fps, budget=budget,
+                 source={"file": os.path.basename(path), "format": ext.lstrip("."), "reader": "gltf",
+                         "frame": "glTF: Y-up metres by specification"})
+    return mesh.replace(up_axis="Y", meters_per_unit=1.0)
