@@ -266,6 +266,41 @@ def test_bone_boundary_penalty_makes_fewer_collapses_across_bones(tube):
     assert saved > 0 and with_penalty < without
 
 
+
+def test_skin_transfer_keeps_each_shell_to_its_own_skin():
+    """A rigid band bound to the tip with weight 1, 3 mm outside the tube (as a rigid part or a
+    second skin merged into the one skeleton): every proxy vertex of the body keeps the body's
+    weights (the tip's small share there), every vertex of the band keeps weight 1 on the tip.
+    Closest points over the whole mesh gave body vertices the band's weight 1 (and 3.6x the
+    deviation)."""
+    from pipeline.stages.bind import bind
+    from pipeline.stages.orient import orient
+
+    m = synth.make_tube(around=32, rings=40, frames=4)
+    off = np.array([0.3, -0.2, 0.1])
+    bp, bt = synth.tube_geometry(around=24, rings=6, length=0.4, radius=0.403)
+    n0 = m.vertex_count
+    m = m.replace(positions=np.vstack([m.positions, bp + [0, 1.3, 0] - off]),
+                  triangles=np.vstack([m.triangles, bt + n0]),
+                  joint_indices=np.vstack([m.joint_indices, np.tile([2, 0, 0, 0], (len(bp), 1))]).astype(np.int32),
+                  joint_weights=np.vstack([m.joint_weights, np.tile([1, 0, 0, 0], (len(bp), 1))]).astype(np.float32))
+    m, _ = orient(m)
+    m, _ = bind(m, 4)
+    p, rep = simplify(m, target_faces=400)
+    assert rep.counts["closed_shells_out"] == 2 and p.face_count <= 400
+    shell = _shells(p.triangles.astype(np.int64), p.vertex_count)[0]
+    vshell = np.empty(p.vertex_count, np.int64)
+    vshell[p.triangles.ravel()] = np.repeat(shell, 3)
+    y = p.positions[:, 1] + off[1]
+    band = [s for s in np.unique(vshell) if y[vshell == s].min() > 1.29 and y[vshell == s].max() < 1.71]
+    assert len(band) == 1
+    on_band = vshell == band[0]
+    tip = np.where(p.joint_indices == 2, p.joint_weights, 0.0).sum(axis=1)
+    assert np.all(tip[on_band] == 1.0)
+    body_there = ~on_band & (y > 1.3) & (y < 1.7)
+    assert body_there.sum() >= 8 and tip[body_there].max() < 0.3  # the chain's tip share at y 1.3..1.7
+
+
 # ------------------------------------------------------------------------------ done-when
 def _usd_skinned(path, clip, times):
     """Stage-space skinned points of the asset's mesh at ``times`` of ``clip`` (None: the bind

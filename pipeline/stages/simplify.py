@@ -35,7 +35,8 @@ the proxy's parts, spheres and the every-frame proof are made exactly as for any
    again to a lower target.  Each merged vertex sits at its cluster's quadric-optimal point.
 
 3. Skin: closest-point transfer on the full rest mesh.  Each proxy vertex takes the per-bone
-   weights of its nearest point on the full rest surface, interpolated barycentrically over that
+   weights of its nearest point on its own shell of the full rest surface (a rigid part or a
+   second skin beside the body keeps its own joints), interpolated barycentrically over that
    triangle's corners (weights of each bone are interpolated, joint indices never); the strongest
    ``--max-influences`` are kept and renormalised by :func:`pipeline.stages.bind.limit_influences`,
    the same code ``bind`` uses.  This is local at joints, where a cluster average would blend the
@@ -368,19 +369,44 @@ def _collapses(embedded: np.ndarray, tris: np.ndarray, target: int) -> np.ndarra
     return np.asarray(col, dtype=np.int64).reshape(-1, 2)
 
 
-def transfer_weights(full: SkinnedMesh, points: np.ndarray, max_influences: int):
+def transfer_weights(full: SkinnedMesh, points: np.ndarray, max_influences: int, point_shell=None, face_shell=None):
     """Skin weights at ``points`` (mesh space, rest) by closest-point transfer on the full rest
     mesh: per-bone weights interpolated barycentrically over the nearest triangle, strongest
     ``max_influences`` kept and renormalised.
 
+    ``point_shell`` (n',) int and ``face_shell`` (m,) int, when given, keep each point to the
+    triangles of its own shell: a rigid part (a helmet bound to the head with weight 1) or another
+    skin merged into the one skeleton must not take the weights of a different shell that happens
+    to lie nearer (a point of a shell with no triangle, ``-1``, looks at every triangle).
+
     Returns ``(joint_indices (n', max_influences) int32, joint_weights (n', max_influences)
-    float32, distance (n',) float64)``: the distance from each point to the full rest surface."""
+    float32, distance (n',) float64)``: the distance from each point to its full rest surface."""
     rest = full.positions
     tri = full.triangles.astype(np.int64)
     pts = np.asarray(points, dtype=np.float32)
     n2 = len(pts)
     kk = int(min(FULL_CANDIDATES, len(tri)))
-    cand = cKDTree(rest.astype(np.float64)[tri].mean(axis=1)).query(pts, k=kk)[1].reshape(n2, kk)
+    centroids = rest.astype(np.float64)[tri].mean(axis=1)
+    if point_shell is None or face_shell is None:
+        cand = cKDTree(centroids).query(pts, k=kk)[1].reshape(n2, kk)
+    else:
+        point_shell = np.asarray(point_shell, dtype=np.int64)
+        face_shell = np.asarray(face_shell, dtype=np.int64)
+        cand = np.empty((n2, kk), np.int64)
+        mine = np.isin(point_shell, face_shell)
+        if not mine.all():
+            cand[~mine] = cKDTree(centroids).query(pts[~mine], k=kk)[1].reshape(-1, kk)
+        order = np.argsort(face_shell, kind="stable")
+        shells, first, count = np.unique(face_shell[order], return_index=True, return_counts=True)
+        for s, f0, c in zip(shells, first, count):
+            rows = np.flatnonzero(point_shell == s)
+            if not len(rows):
+                continue
+            faces = order[f0:f0 + c]
+            k = int(min(kk, c))
+            near = cKDTree(centroids[faces]).query(pts[rows], k=k)[1].reshape(len(rows), k)
+            # a shell with fewer triangles than kk repeats its nearest one (a duplicate candidate)
+            cand[rows] = faces[np.pad(near, ((0, 0), (0, kk - k)), mode="edge")]
     d, t, bary = nearest_on_candidates(pts, np.repeat(np.arange(n2)[:, None], 3, 1),
                                        np.tile([1.0, 0.0, 0.0], (n2, 1)), rest, tri, cand)
     corners = tri[t]                                       # (n', 3)
@@ -465,7 +491,11 @@ class _Decimator:
 
     def build(self, goal: int, limit: int | None = None) -> _Candidate:
         r = self.replay(goal, limit)
-        ji, jw, _ = transfer_weights(self.mesh, r.positions, self.max_influences)
+        # each proxy vertex keeps to its own shell's skin (collapses never join shells)
+        pshell = np.full(len(r.positions), -1, np.int64)
+        live = r.vertex_map >= 0
+        pshell[r.vertex_map[live]] = self.vshell[live]
+        ji, jw, _ = transfer_weights(self.mesh, r.positions, self.max_influences, pshell, self.shell)
         proxy = self.mesh.replace(positions=r.positions, triangles=r.triangles.astype(np.int32), joint_indices=ji,
                                   joint_weights=jw, parts=None)
         acc = self.col[r.accepted]
