@@ -200,10 +200,11 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None, s
     """Run every stage but ``write``: returns ``(mesh, reports)``.
 
     ``progress(i, n, stage)`` is called before each stage when given.  ``stop_after`` ends the
-    run after that stage (e.g. ``"bind"``: the full mesh a proxy is simplified from).
+    run after that stage (``"bind"``: the full mesh a proxy is simplified from; ``"simplify"``:
+    the proxy, or the full mesh when the settings ask for none).
     """
-    if stop_after is not None and stop_after not in STAGES:
-        raise ValueError(f"stop_after: expected one of {STAGES}, got {stop_after!r}")
+    if stop_after not in (None, "bind", "simplify"):
+        raise ValueError(f"stop_after: expected None, 'bind' or 'simplify', got {stop_after!r}")
     s = settings or ImportSettings()
     s.check()
     reports = []
@@ -251,6 +252,8 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None, s
         return mesh, reports
     if s.proxy:
         mesh = step("simplify", lambda: simplify(mesh, s.target_faces, s.max_deviation, s.max_influences))
+    if stop_after == "simplify":
+        return mesh, reports
     mesh = step("parts", lambda: parts(mesh, s.parts, s.min_part_faces, s.parts_threshold))
     # on the clips as the asset stores them (half-precision scales), so the spheres hold for it
     mesh = step("spheres", lambda: spheres(stored_clips(mesh)))

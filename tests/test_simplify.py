@@ -482,6 +482,29 @@ def test_inspect_shows_the_proxy(proxies):
     assert f"deviation     <= {c['deviation']:.4g}" in r.stdout and f"{c['sampled_deviation']:.4g} measured" in r.stdout
 
 
+def test_validate_source_on_a_proxy(proxies, tmp_path):
+    """``validate --source`` re-simplifies the source with the proxy's settings: its own source
+    passes COL6xx; a proxy whose skin no longer matches it (weights changed) fails COL601."""
+    from pxr import Usd, UsdSkel
+
+    from validators.cli import validate_cmd
+
+    src = ROOT / "samples" / "creature.glb"
+    _, prox = proxies(src)
+    r = CliRunner().invoke(validate_cmd, [str(prox), "--source", str(src), "--select", "COL6"])
+    assert r.exit_code == 0 and "PASS" in r.stdout, r.output
+    stale = tmp_path / "stale.usda"
+    stage = Usd.Stage.Open(str(prox))
+    mesh = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Root) is False and p.GetTypeName() == "Mesh")
+    pv = UsdSkel.BindingAPI(mesh).GetJointWeightsPrimvar()
+    w = np.array(pv.Get()).reshape(-1, pv.GetElementSize())
+    w[:, 0], w[:, 1] = w[:, 0] * 0.5 + 0.5 * w[:, 1], w[:, 1] * 0.5 + 0.5 * w[:, 0]
+    pv.Set(w.ravel().tolist())
+    stage.Export(str(stale))
+    r = CliRunner().invoke(validate_cmd, [str(stale), "--source", str(src), "--select", "COL6"])
+    assert r.exit_code == 1 and "COL601" in r.stdout and "COL604" not in r.stdout, r.output
+
+
 def test_render_source_draws_the_full_mesh_behind_the_proxy(tmp_path):
     from PIL import Image
 
