@@ -338,8 +338,10 @@ def _usd_skinned(path, clip, times):
     return out, tris, stage  # the stage keeps the prims alive
 
 
-CHARACTERS = [ROOT / "samples" / "creature.glb", ROOT / "samples" / "limb.glb",
-              CORPUS / "realworld" / "threejs_r121_stormtrooper.dae", CORPUS / "realworld" / "threejs_r121_CesiumMan.glb"]
+#: Every sample (glb, fbx, usda) and two corpus characters, in CI.
+SAMPLES = sorted(p for p in (ROOT / "samples").iterdir() if p.suffix in (".glb", ".gltf", ".fbx", ".dae", ".usda"))
+CHARACTERS = SAMPLES + [CORPUS / "realworld" / "threejs_r121_stormtrooper.dae",
+                        CORPUS / "realworld" / "threejs_r121_CesiumMan.glb"]
 #: Characters checked with ``pytest -m slow`` only (CI time): under 2,000 faces (the proxy is the
 #: full mesh), covered by the ones above (open shells, a few collapses), or slow to validate
 #: (mannequiny: the frame proof of its 194 frames takes minutes, and fails on the full mesh too).
@@ -359,7 +361,7 @@ def proxies(tmp_path_factory):
 
     def get(src):
         if src not in cache:
-            prox = base / f"{src.stem}.proxy.usda"
+            prox = base / f"{src.name}.proxy.usda"
             r = CliRunner().invoke(main, ["import", str(src), "-o", str(prox), "--target-faces", "2000", "--json"])
             assert r.exit_code == 0, r.output
             cache[src] = (json.loads(r.output), prox)
@@ -371,7 +373,7 @@ def proxies(tmp_path_factory):
 def _full_findings(src, tmp):
     from validators import check_asset
 
-    full = tmp / f"{src.stem}.full.usda"
+    full = tmp / f"{src.name}.full.usda"
     r = CliRunner().invoke(main, ["import", str(src), "-o", str(full)])
     assert r.exit_code == 0, r.output
     return {f.code for f in check_asset(full).findings if f.severity == "error"}
