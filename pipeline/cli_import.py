@@ -58,7 +58,7 @@ def format_summary(result) -> str:
     lines.append("")
     lines.append(f"  vertices {s['vertices_in']} in, {s['vertices_out']} out | faces flipped {s['faces_flipped']} | "
                  f"influences dropped {s['influences_dropped']} | parts {s['parts']} | clips {s['clips']} | frames {s['frames']}")
-    lines += _source_lines(next(r for r in result.reports if r.stage == "read"))
+    lines += _source_lines(next(r for r in result.reports if r.stage == "read"), result.mesh)
     sph = next(r for r in result.reports if r.stage == "spheres")
     parts = sph.details.get("parts", [])
     if parts:
@@ -102,9 +102,16 @@ def proxy_lines(rep) -> list:
         out.append("  (deviation: upper bound of the two-sided distance between the proxy and the full skinned mesh, "
                    "stage units; measured: the largest distance found between them)")
     return out
-def _source_lines(read_rep) -> list:
+
+
+#: Storage error bounds below this (relative to the model size) are float32 noise, not shown.
+STORAGE_SHOWN = 1e-6
+
+
+def _source_lines(read_rep, mesh=None) -> list:
     """Per mesh (skinned or rigid, vertices) and per clip (source keys, sampling, frames, error
-    bound where keys fall between frames) of the read stage."""
+    bound where keys fall between frames, and the bound on what the asset's storage types move,
+    where its scales are not exactly 1) of the read stage and of ``mesh`` as written."""
     d = read_rep.details or {}
     lines = []
     from .run import mesh_provenance
@@ -116,12 +123,14 @@ def _source_lines(read_rep) -> list:
     wn = d.get("weights_normalised") or {}
     if wn.get("vertices"):
         lines.append(f"  {wn['vertices']} vertices had weights not summing to 1 (sums {wn['min_sum']:g}..{wn['max_sum']:g}): normalised")
-    clips = d.get("clips") or []
+    clips = (mesh.source.get("clip_info") if mesh is not None else None) or d.get("clips") or []
     if clips:
         lines += ["", f"  {'clip':<24} {'keys':>5} {'frames':>6}  sampling"]
         for c in clips:
             bound = (f"; off-grid error <= {c['error_bound_relative']:.2g} x size"
                      if "error_bound_relative" in c else "")
+            if c.get("storage_error_relative", 0.0) > STORAGE_SHOWN:
+                bound += f"; stored (half-precision scales) error <= {c['storage_error_relative']:.2g} x size"
             lines.append(f"  {str(c['name'])[:24]:<24} {c['source_keys']:>5} {c['frames']:>6}  {c['sampling']}{bound}")
     return lines
 

@@ -280,12 +280,15 @@ class Continuous:
     sample at one of its ends already fails the sampled proof); bound (I, P): a J-space upper bound
     of the part's farthest vertex over the interval (for the spheres stage); rho (I, P): the
     J-space radius the bound was held to; failures: list of dicts (interval, part, t0, t1, time,
-    vertex, excess, definite)."""
+    vertex, excess, definite); ratio (I, P): the scale ratio ``s_lo / s_hi`` of each part joint's
+    transform over the interval (1 where it is a similarity throughout): a J-space bound ``U``
+    certifies a radius ``r`` when ``U <= r * ratio``."""
 
     status: np.ndarray
     bound: np.ndarray
     rho: np.ndarray
     failures: list = field(default_factory=list)
+    ratio: np.ndarray | None = None
     subdivided: int = 0
 
 
@@ -336,7 +339,8 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     frame_bound : (F, P) upper bounds of the farthest vertex at the samples (stage space, or the
         part joint's space with ``frame_bound_space="joint"``); frame_ok : (F, P) bool the
         sampled verdicts (intervals next to a failing sample are not checked: status 5)
-    rho : (P,) or (I, P), optional: J-space radii to hold the bounds to (default from the spheres)
+    rho : (P,) or (I, P), optional: radii to hold the bounds to, times the interval's scale ratio as
+        for the spheres' own radii (default: the spheres' radii with the tolerance)
     """
     times = np.asarray(times, dtype=np.float64)
     F, P = len(times), rig.P
@@ -374,6 +378,10 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     ratio = np.where(iso, 1.0, s_lo / s_hi)
     if rho is None:
         rho = (r[None] * (1.0 + tol_rel) * ratio[:, J] * (1 - 1e-12) + tol_abs / s_hi[:, J])
+    else:
+        # radii given (the spheres stage's targets): held as the default holds the spheres' own
+        # radii, times the interval's scale ratio, so what passes here passes the validator
+        rho = np.asarray(rho, dtype=np.float64) * ratio[:, J] * (1 - 1e-12)
     rho = np.broadcast_to(np.asarray(rho, dtype=np.float64), (I, P)).copy()
     # level A1: the continuous test K
     kc = np.maximum(e0, e1) + delta + pert + lam * bd.pj_radius[None]
@@ -408,7 +416,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     bound = np.where(status == 0, U, np.inf)
     if growth:
         status[:] = np.where(U <= rho, 0, -1)
-    out = Continuous(status, bound, rho)
+    out = Continuous(status, bound, rho, ratio=ratio[:, J].copy())
     todo = np.argwhere(status == -1)
     if len(todo):
         _refine(rig, clip, times, fac, delta, pert, own, pair_part, todo, out, tol_abs, tol_rel, growth, max_depth)

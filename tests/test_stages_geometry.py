@@ -472,3 +472,80 @@ def test_spheres_hold_under_a_sheared_joint():
 def test_spheres_needs_parts():
     with pytest.raises(ValueError, match="parts"):
         spheres(synth.make_tube())
+
+
+def _stretched_tube(k=1.0, frames=9):
+    """The synthetic tube with animated non-uniform stretch scales (0.97..1.03, what Rigify and
+    Godot rigs animate) on every joint, and its roots carrying a uniform scale ``k``."""
+    mesh = synth.make_tube(around=12, rings=8, frames=frames)
+    rng = np.random.default_rng(7)
+    clips = []
+    for c in mesh.clips:
+        local = c.local.copy()
+        s = 1.0 + 0.03 * np.sin(np.linspace(0, 3, len(c.times))[:, None, None] + rng.uniform(0, 6, (1, 3, 3)))
+        local[..., :3, :3] *= s[..., None, :]
+        local[:, 0, :3, :] *= k
+        clips.append(type(c)(c.name, c.times, local))
+    bind = mesh.bind_transforms.copy()
+    bind[0, :3, :] *= k
+    bind[1:] = np.diag([k, k, k, 1.0]) @ bind[1:]
+    return mesh.replace(clips=tuple(clips), bind_transforms=bind)
+
+
+@pytest.mark.parametrize("k", [1.0, 0.01])
+def test_stored_clips_error_within_its_bound_and_far_below_plain_rounding(k):
+    """UsdSkel keeps scales as half3: rounding each joint's values on its own errs ~3e-4 of the
+    model down a stretched chain; storage with corrected translations (``stages.write._store_clip``)
+    errs a fraction of that and stays inside the bound it states, measured by the naive skinning
+    reference on every frame."""
+    from pipeline.stages.write import stored_clips
+    from pipeline.tolerances import model_scale
+    from pipeline.xforms import compose_trs, decompose_trs
+
+    mesh = _stretched_tube(k)
+    mesh = mesh.replace(source={"clip_info": [{"name": c.name} for c in mesh.clips]})
+    stored = stored_clips(mesh)
+    exact = naive.skin_points(mesh, naive.all_poses(mesh))
+    size = model_scale(exact.reshape(-1, 3))
+    got = naive.skin_points(stored, naive.all_poses(stored))
+    err = np.linalg.norm(got - exact, axis=-1).max(axis=-1) / size  # per pose (bind, then frames)
+    bounds = {i["name"]: i["storage_error_relative"] for i in stored.source["clip_info"]}
+    f = len(mesh.clips[0].times)
+    for ci, c in enumerate(mesh.clips):
+        e = err[1 + ci * f: 1 + (ci + 1) * f].max()
+        assert e <= bounds[c.name] + 1e-6, (c.name, e, bounds[c.name])
+    # plain rounding (every value on its own), as the asset stored it before
+    plain = []
+    for c in mesh.clips:
+        local = c.local.copy()
+        local[:, 0, :3, :] /= k
+        t, q, s = decompose_trs(local)
+        m = compose_trs(t.astype(np.float32), q.astype(np.float32), s.astype(np.float16))
+        m[:, 0, :3, :] *= k
+        plain.append(type(c)(c.name, c.times, m))
+    rounded = naive.skin_points(mesh, naive.all_poses(mesh.replace(clips=tuple(plain))))
+    plain_err = np.linalg.norm(rounded - exact, axis=-1).max() / size
+    # (measured: plain 2.9e-4 / 3.3e-4 of the size, corrected 7.4e-5 / 5.0e-5, bounds 1.3e-4 / 1.4e-4
+    # on this tube, where every joint weighs on every vertex: the worst case for the correction)
+    assert plain_err > 1e-4 and err.max() < plain_err / 3 and max(bounds.values()) < plain_err / 2, (
+        plain_err, err.max(), bounds)
+
+
+def test_stretched_chain_written_passes_the_continuous_certificate(tmp_path):
+    """Non-uniform animated stretch on a joint's path makes the continuous certificate hold a
+    radius ``r`` as ``r * s_lo / s_hi``; the spheres stage must grow by that ratio too, or the
+    validator cannot certify what the import wrote (mannequiny's and lumberjack's stretched legs
+    failed COL407 so)."""
+    from pipeline.stages.write import stored_clips, write
+    from validators import check_asset
+
+    mesh = _stretched_tube(frames=7)
+    mesh, _ = parts(mesh)
+    out, _ = spheres(stored_clips(mesh))
+    path = tmp_path / "stretched.usda"
+    write(out, str(path))
+    rep = check_asset(str(path))
+    errors = [(f.code, f.message) for f in rep.findings if f.severity == "error"]
+    assert rep.passed and not errors, errors[:3]
+    n = rep.stats["frameproof"]["intervals"]
+    assert n["failed"] == n["undecided"] == 0, n

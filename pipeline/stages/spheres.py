@@ -23,9 +23,11 @@ UsdSkel interpolates it, which ``colossus validate`` certifies with
 :func:`runtime.certify.continuous`.  The same certificate runs here on the clips exactly as the
 writer will store them (translations and rotations float32, scales float16) in ``growth`` mode,
 holding each interval to the padded minimal radius (``r (1 + SPHERE_PAD_RADIUS) + SPHERE_PAD_RELATIVE
-* model size``): wherever it cannot, it subdivides, down to 2^6 sub-steps, and the part's radius
-becomes the largest bound it reached (``growth`` in the report, beyond the padded radius; 0 for
-most parts).  The validator's adaptive subdivision stops at or before every node this one stopped
+* model size``) times the interval's scale ratio (``s_lo / s_hi`` of the joint's transform, below 1
+where a non-uniform scale on its path makes the certificate conservative, exactly as the validator
+holds a radius): wherever it cannot, it subdivides, down to 2^6 sub-steps, and the part's radius
+becomes the largest bound it reached over that ratio (``growth`` in the report, beyond the padded
+radius; 0 for most parts).  The validator's adaptive subdivision stops at or before every node this one stopped
 at (its radius is at least the bound there), so the written spheres pass it.  Finally the radius
 is rounded up to float32.
 
@@ -206,7 +208,8 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
 def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
     """(P,) the radius each part needs between frames: at most ``target`` where the continuous
     certificate (:func:`runtime.certify.continuous` in growth mode, on the clips as written)
-    holds every interval to it, else the largest bound it reached at :data:`GROWTH_DEPTH`."""
+    holds every interval to it (times the interval's scale ratio, as the validator holds a radius),
+    else the largest bound it reached at :data:`GROWTH_DEPTH` over that ratio."""
     P = len(parts_in)
     need = np.zeros(P)
     if not mesh.clips or P == 0:
@@ -232,5 +235,7 @@ def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
         c = certify.continuous(rig, written_clip(clip, mesh.joint_count, roots, k), clip.times, far,
                                np.ones_like(far, bool), 0.0, 0.0, rho=target, growth=True,
                                max_depth=GROWTH_DEPTH, frame_bound_space="joint")
-        need = np.maximum(need, np.max(np.where(np.isfinite(c.bound), c.bound, 0.0), axis=0))
+        # a J-space bound U certifies a radius r where U <= r * ratio (non-uniform scales on the
+        # joint's path): the radius each interval needs is U / ratio
+        need = np.maximum(need, np.max(np.where(np.isfinite(c.bound), c.bound / c.ratio, 0.0), axis=0))
     return need

@@ -99,30 +99,137 @@ def root_scale(mesh: SkinnedMesh) -> float:
     return k
 
 
+def _joint_local_points(mesh: SkinnedMesh):
+    """Where each joint holds the vertices it moves.
+
+    Returns
+    -------
+    centers : (b, 3) float64
+        Per joint, the weight-averaged joint-local (bind) position ``inv(bind_j) @ geom_bind @ v``
+        of the vertices with a nonzero weight on it (0 for joints that move no vertex).
+    dist : (n, k) float64
+        Per vertex and influence, the distance of the vertex's joint-local position from that
+        joint's centre (0 for padding influences).
+    """
+    b = len(mesh.parents)
+    v = mesh.positions.astype(np.float64) @ mesh.geom_bind[:3, :3].T + mesh.geom_bind[:3, 3]
+    inv = np.linalg.inv(mesh.bind_transforms)
+    ji = np.clip(mesh.joint_indices, 0, max(b - 1, 0))
+    w = np.where(mesh.joint_weights > 0, mesh.joint_weights, 0.0).astype(np.float64)
+    q = np.einsum("nkab,nb->nka", inv[ji, :3, :3], v) + inv[ji, :3, 3]          # (n, k, 3)
+    wsum = np.bincount(ji.ravel(), weights=w.ravel(), minlength=b)
+    centers = np.stack([np.bincount(ji.ravel(), weights=(w * q[..., a]).ravel(), minlength=b)
+                        for a in range(3)], axis=1) / np.where(wsum > 0, wsum, 1.0)[:, None]
+    dist = np.where(w > 0, np.linalg.norm(q - centers[ji], axis=-1), 0.0)
+    return centers, dist
+
+
+def _store_clip(local: np.ndarray, parents: np.ndarray, centers: np.ndarray):
+    """Round one clip's joint-local transforms to the asset's storage types, correcting each
+    joint's translation for what its parents' and its own rounding moved.
+
+    UsdSkel stores a joint's local scale as ``half3`` (11 significant bits: an animated stretch
+    of 1.03 moves by up to 2**-11 of itself), rotation as ``quatf`` and translation as
+    ``float3``.  Rounding each value on its own lets the errors add up down a chain (a thigh's
+    rounded stretch moves the knee, the shin and the foot).  Instead, parents first, each joint
+    keeps its rounded rotation and scale, and its translation is chosen in full float precision
+    so that, with the parent's *stored* world transform ``W'_p = [M | o]``, the affine error
+    ``e(q) = W'_p L'_j q - W_j q`` (``W_j`` the exact world transform, ``q`` a joint-local point)
+    vanishes at the centre ``c_j`` of the joint's own vertices: ``t'_j = M^-1 (w_j - o - D_j c_j)``
+    with ``D_j = M R'_j S'_j - A_j`` (``A_j`` the linear part of ``W_j``).  Then
+    ``e(q) = D_j (q - c_j)``, so ``|e(q)| <= ||D_j||_2 |q - c_j|``, and a vertex skinned by
+    weights ``w_k`` to joints ``j_k`` errs at most ``sum_k w_k ||D_jk||_2 |q_k - c_jk|`` (LBS is a
+    weighted sum of the joints' transforms; float32 rounding of ``t'`` adds ~1e-7 of it).  Joint
+    positions down the chain stay exact up to ``D_j c_j``, which the children absorb.
+
+    Parameters
+    ----------
+    local : (f, b, 4, 4) float64
+        Exact joint-local transforms per frame.
+    parents : (b,) int
+    centers : (b, 3) float64
+        From :func:`_joint_local_points`.
+
+    Returns
+    -------
+    stored : (f, b, 4, 4) float64
+        ``T R S`` of the rounded values (``write`` stores exactly these).
+    norms : (f, b) float64
+        ``||D_j||_2`` per frame and joint.
+    """
+    from runtime.schema import parents_first
+
+    from ..xforms import quat_to_matrix
+
+    f, b = local.shape[:2]
+    _, q, s = decompose_trs(local)
+    q = q.astype(np.float32).astype(np.float64)
+    s = s.astype(np.float16).astype(np.float64)
+    lin = quat_to_matrix(q) * s[..., None, :]                      # stored local linear parts
+    t = np.zeros((f, b, 3))
+    world = np.empty_like(local)                                    # exact, parents first
+    sw_lin, sw_off = np.empty((f, b, 3, 3)), np.empty((f, b, 3))    # stored world
+    norms = np.zeros((f, b))
+    for j in parents_first(parents):
+        p = parents[j]
+        if p < 0:
+            world[:, j] = local[:, j]
+            m, o = np.broadcast_to(np.eye(3), (f, 3, 3)), np.zeros((f, 3))
+        else:
+            world[:, j] = world[:, p] @ local[:, j]
+            m, o = sw_lin[:, p], sw_off[:, p]
+        stored_lin = m @ lin[:, j]
+        d = stored_lin - world[:, j, :3, :3]
+        rhs = world[:, j, :3, 3] - o - d @ centers[j]
+        tj = np.linalg.solve(m, rhs[..., None])[..., 0].astype(np.float32).astype(np.float64)
+        t[:, j] = tj
+        sw_lin[:, j] = stored_lin
+        sw_off[:, j] = (m @ tj[..., None])[..., 0] + o
+        norms[:, j] = np.linalg.norm(d, ord=2, axis=(-2, -1))
+    return compose_trs(t, q, s), norms
+
+
+def _storage_bound(norms: np.ndarray, joint_indices, joint_weights, dist, chunk: int = 64) -> float:
+    """``max`` over frames and vertices of ``sum_k w_k ||D_jk||_2 |q_k - c_jk|`` (see
+    :func:`_store_clip`); ``norms`` (f, b), ``dist`` (n, k)."""
+    wd = np.where(joint_weights > 0, joint_weights, 0.0) * dist
+    ji = np.clip(joint_indices, 0, norms.shape[1] - 1)
+    out = 0.0
+    for i in range(0, len(norms), chunk):
+        out = max(out, float(np.max(np.einsum("fnk,nk->fn", norms[i:i + chunk][:, ji], wd), initial=0.0)))
+    return out
+
+
 def stored_clips(mesh: SkinnedMesh) -> SkinnedMesh:
     """``mesh`` with every clip's joint-local transforms as the asset will store them.
 
     UsdSkel stores each joint's translation as ``float3``, rotation as ``quatf`` and scale as
-    ``half3`` (the SkelAnimation schema's types).  Half precision moves an animated scale by up to
-    ``2**-11`` of itself; the spheres must be computed on the motion the asset really has, so the
-    pipeline rounds the clips the same way before the ``spheres`` stage (``write`` then stores
-    exactly these values).  The roots' common scale (:func:`root_scale`) is taken out first, as
-    the writer does, so it is not rounded.
+    ``half3`` (the SkelAnimation schema's types).  The spheres must be computed on the motion the
+    asset really has, so the pipeline rounds the clips the way :func:`_store_clip` does (the
+    translations corrected for the rounded scales) before the ``spheres`` stage; ``write`` then
+    stores exactly these values.  The roots' common scale (:func:`root_scale`) is taken out first,
+    as the writer does, so it is not rounded.
+
+    Each clip's ``clip_info`` entry (in ``mesh.source``) gets ``storage_error_relative``: the
+    bound of :func:`_store_clip` on how far storage moves any vertex, over the model size.
     """
+    from ..tolerances import model_scale
+
     k = root_scale(mesh)
     roots = mesh.parents < 0
-    clips = []
+    centers, dist = _joint_local_points(mesh)
+    size = model_scale(mesh.positions.astype(np.float64) @ mesh.geom_bind[:3, :3].T)
+    clips, bounds = [], {}
     for c in mesh.clips:
         local = c.local.copy()
         local[:, roots, :3, :] /= k
-        t, q, s = decompose_trs(local)
-        t = t.astype(np.float32).astype(np.float64)
-        q = q.astype(np.float32).astype(np.float64)
-        s = s.astype(np.float16).astype(np.float64)
-        out = compose_trs(t, q, s)
+        out, norms = _store_clip(local, mesh.parents, centers)
         out[:, roots, :3, :] *= k
         clips.append(type(c)(c.name, c.times, out))
-    return mesh.replace(clips=tuple(clips))
+        bounds[c.name] = _storage_bound(norms, mesh.joint_indices, mesh.joint_weights, dist) * abs(k) / size
+    info = [dict(i, storage_error_relative=bounds[i["name"]]) if i.get("name") in bounds else i
+            for i in mesh.source.get("clip_info", [])]
+    return mesh.replace(clips=tuple(clips), source=dict(mesh.source, clip_info=info))
 
 
 def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
@@ -274,6 +381,8 @@ def _clip_source(info: dict, mesh: SkinnedMesh) -> dict:
         from ..tolerances import model_scale
         out["errorBound"] = float(info["error_bound_relative"] * model_scale(mesh.positions))
         out["errorBoundRelative"] = float(info["error_bound_relative"])
+    if "storage_error_relative" in info:
+        out["storageErrorBoundRelative"] = float(info["storage_error_relative"])
     return out
 
 
