@@ -338,15 +338,19 @@ def _usd_skinned(path, clip, times):
     return out, tris, stage  # the stage keeps the prims alive
 
 
-#: Every sample (glb, fbx, usda) and two corpus characters, in CI.
+#: Every sample (glb, fbx, usda) and three corpus characters, in CI.
 SAMPLES = sorted(p for p in (ROOT / "samples").iterdir() if p.suffix in (".glb", ".gltf", ".fbx", ".dae", ".usda"))
+#: RobotExpressive: 14 meshes, most of them rigid parts under joints (24 closed shells).
 CHARACTERS = SAMPLES + [CORPUS / "realworld" / "threejs_r121_stormtrooper.dae",
-                        CORPUS / "realworld" / "threejs_r121_CesiumMan.glb"]
+                        CORPUS / "realworld" / "threejs_r121_CesiumMan.glb",
+                        CORPUS / "realworld" / "threejs_r121_RobotExpressive.glb"]
 #: Characters checked with ``pytest -m slow`` only (CI time): under 2,000 faces (the proxy is the
 #: full mesh), covered by the ones above (open shells, a few collapses), or slow to validate
 #: (mannequiny: the frame proof of its 194 frames takes minutes, and fails on the full mesh too).
 MORE_CHARACTERS = [CORPUS / "realworld" / "godot_mannequiny.glb", CORPUS / "realworld" / "playcanvas_lumberjack.glb",
-                   CORPUS / "khronos" / "Fox.glb", CORPUS / "assimp" / "Testwuson.X",
+                   CORPUS / "khronos" / "Fox.glb", CORPUS / "khronos" / "RiggedFigure.gltf",
+                   CORPUS / "realworld" / "godot_platformer_player.glb", CORPUS / "realworld" / "usdwg_CesiumMan.usdz",
+                   CORPUS / "assimp" / "Testwuson.X",
                    CORPUS / "assimp" / "animation_with_skeleton.fbx"]
 #: The dense comparison in CI (the rest: ``pytest -m slow``).
 DENSE_IN_CI = {"creature.glb", "threejs_r121_stormtrooper.dae"}
