@@ -189,76 +189,13 @@ def factor_bounds(clip, times, rest_local):
     of the smooth lerp when the scale changes over the interval: ``eps`` (I, J, 2) bounds the
     resulting error of the linear part, ``e`` forward and ``e / (s_min (s_min - e))`` inverse.
 
-    Returns a dict of (I, J, ...) float64 arrays: L0, L1, Li0, Li1, fw, iv, dt, eps."""
+    Returns a dict of (I, J, ...) float64 arrays: L0, L1, Li0, Li1, fw, iv, dt, eps (and iso,
+    locals).  Computed by the compiled :func:`runtime.kernels.bounds.factor_terms` (one pass over
+    the (interval, joint) pairs; it runs on every clip the proof checks)."""
     times = np.asarray(times, dtype=np.float64)
     L, t, q, s = PK.locals_at(clip, times, rest_local, trs=True)
-    Li = _inv_affine(L)
-    I, J = len(times) - 1, len(rest_local)
-    fw = np.zeros((I, J, 3))
-    iv = np.zeros((I, J, 3))
-    dt = np.zeros((I, J))
-    eps = np.zeros((I, J, 2))
-    lin = rest_local[:, :3, :3]
-    sv = np.linalg.svd(lin, compute_uv=False)
-    iso = np.repeat((sv[:, 0] - sv[:, -1] <= 1e-12 * sv[:, 0])[None], I, 0)  # a similarity factor
-    fw[:, :, 0] = _norm2(lin)[None]
-    iv[:, :, 0] = _norm2(np.linalg.inv(lin))[None]
-    if len(clip.anim_to_skel) and I > 0:
-        a = clip.anim_to_skel
-        qn = q / np.linalg.norm(q, axis=-1, keepdims=True)
-        q0, q1 = qn[:-1], qn[1:]
-        sign = np.where(np.einsum("iak,iak->ia", q0, q1) < 0, -1.0, 1.0)[..., None]
-        theta = 4.0 * np.arctan2(np.linalg.norm(q0 - sign * q1, axis=-1), np.linalg.norm(q0 + sign * q1, axis=-1))
-        om = OMEGA_MARGIN * theta
-        al = ALPHA_MARGIN * theta ** 2
-        sa = np.abs(s)
-        smax = np.maximum(_max3(sa[:-1]), _max3(sa[1:]))
-        smin = np.minimum(_min3(sa[:-1]), _min3(sa[1:]))
-        smin = np.where(_max3(np.sign(s[:-1]) != np.sign(s[1:])), 0.0, smin)
-        ds = _max3(np.abs(s[1:] - s[:-1]))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv_s = np.where(smin > 0, 1.0 / smin, np.inf)
-        fw[:, a] = np.stack([smax, om * smax + ds, al * smax + 2 * om * ds], -1)
-        iv[:, a] = np.stack([inv_s, ds * inv_s ** 2 + om * inv_s,
-                             2 * ds ** 2 * inv_s ** 3 + 2 * om * ds * inv_s ** 2 + al * inv_s], -1)
-        iv[:, a] = np.where(np.isfinite(iv[:, a]), iv[:, a], np.inf)
-        dt[:, a] = np.linalg.norm(t[1:] - t[:-1], axis=-1)
-        e = np.where(ds > 0, 3.0 * 2.0 ** -11 * smax, 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ei = np.where(e > 0, e / (smin * (smin - e)), 0.0)
-        iso[:, a] = (_max3(s[:-1]) == _min3(s[:-1])) & (_max3(s[1:]) == _min3(s[1:]))  # uniform at both ends
-        eps[:, a, 0] = e
-        eps[:, a, 1] = np.where((e > 0) & ~(smin > e), np.inf, ei)
-    return dict(L0=np.ascontiguousarray(L[:-1]), L1=np.ascontiguousarray(L[1:]),
-                Li0=np.ascontiguousarray(Li[:-1]), Li1=np.ascontiguousarray(Li[1:]), fw=fw, iv=iv, dt=dt,
-                eps=eps, iso=iso, locals=L)
-
-
-def _max3(x):
-    """Largest of the last axis (length 3): numpy reduces such short axes slowly."""
-    return np.maximum(np.maximum(x[..., 0], x[..., 1]), x[..., 2])
-
-
-def _min3(x):
-    return np.minimum(np.minimum(x[..., 0], x[..., 1]), x[..., 2])
-
-
-def _inv_affine(L):
-    """Inverses of (..., 4, 4) affine matrices (last row 0 0 0 1) by the 3x3 cofactors: a few
-    vectorised operations instead of one LAPACK call per matrix."""
-    m = L[..., :3, :3]
-    c = np.empty_like(m)  # the adjugate (transposed cofactors), row by row
-    c[..., 0, :] = np.cross(m[..., :, 1], m[..., :, 2])
-    c[..., 1, :] = np.cross(m[..., :, 2], m[..., :, 0])
-    c[..., 2, :] = np.cross(m[..., :, 0], m[..., :, 1])
-    det = np.einsum("...i,...i->...", m[..., :, 0], c[..., 0, :])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = c / det[..., None, None]
-    out = np.zeros_like(L)
-    out[..., :3, :3] = inv
-    out[..., :3, 3] = -np.einsum("...ij,...j->...i", inv, L[..., :3, 3])
-    out[..., 3, 3] = 1.0
-    return out
+    Li, fw, iv, dt, eps, iso = B.factor_terms(L, t, q, s, clip.anim_to_skel, rest_local, OMEGA_MARGIN, ALPHA_MARGIN)
+    return dict(L0=L[:-1], L1=L[1:], Li0=Li[:-1], Li1=Li[1:], fw=fw, iv=iv, dt=dt, eps=eps, iso=iso, locals=L)
 
 
 def _norm2(lin):

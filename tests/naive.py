@@ -434,3 +434,46 @@ def apply_collapses(positions, triangles, collapses, stop_faces=0, limit=None, v
         members[int(shell[a])].discard(c)
         accepted[i] = True
     return P, [tuple(tris[f]) for f in sorted(tris)], accepted
+
+
+# -- continuous-time factor bounds -----------------------------------------------------------
+
+def factor_terms(L, t, q, s, anim, rest_local, omega_margin, alpha_margin):
+    """Numpy transcription of ``runtime.certify.factor_bounds``'s factor bounds (per interval
+    and joint; see its docstring for the derivation): returns Li, fw, iv, dt, eps, iso."""
+    T, J = L.shape[:2]
+    I = T - 1
+    Li = np.full_like(L, np.nan)
+    regular = np.linalg.det(L) != 0
+    Li[regular] = np.linalg.inv(L[regular])  # a zero scale has no inverse (the kernel gives inf)
+    lin = rest_local[:, :3, :3]
+    fw, iv = np.zeros((I, J, 3)), np.zeros((I, J, 3))
+    sv = np.linalg.svd(lin, compute_uv=False)
+    fw[:, :, 0] = sv[:, 0]
+    iv[:, :, 0] = 1.0 / sv[:, -1]
+    iso = np.repeat((sv[:, 0] - sv[:, -1] <= 1e-12 * sv[:, 0])[None], I, 0)
+    dt, eps = np.zeros((I, J)), np.zeros((I, J, 2))
+    for i in range(I):
+        for k, j in enumerate(anim):
+            q0 = q[i, k] / np.linalg.norm(q[i, k])
+            q1 = q[i + 1, k] / np.linalg.norm(q[i + 1, k])
+            if np.dot(q0, q1) < 0:
+                q1 = -q1
+            theta = 4.0 * np.arctan2(np.linalg.norm(q0 - q1), np.linalg.norm(q0 + q1))
+            om, al = omega_margin * theta, alpha_margin * theta ** 2
+            s0, s1 = s[i, k], s[i + 1, k]
+            smax = max(np.abs(s0).max(), np.abs(s1).max())
+            smin = 0.0 if np.any(np.sign(s0) != np.sign(s1)) else min(np.abs(s0).min(), np.abs(s1).min())
+            ds = np.abs(s1 - s0).max()
+            fw[i, j] = (smax, om * smax + ds, al * smax + 2 * om * ds)
+            if smin > 0:
+                r = 1.0 / smin
+                iv[i, j] = (r, ds * r ** 2 + om * r, 2 * ds ** 2 * r ** 3 + 2 * om * ds * r ** 2 + al * r)
+            else:
+                iv[i, j] = np.inf
+            dt[i, j] = np.linalg.norm(t[i + 1, k] - t[i, k])
+            e = 3.0 * 2.0 ** -11 * smax if ds > 0 else 0.0
+            eps[i, j, 0] = e
+            eps[i, j, 1] = 0.0 if e == 0 else (e / (smin * (smin - e)) if smin > e else np.inf)
+            iso[i, j] = bool(np.all(s0 == s0[0]) and np.all(s1 == s1[0]))
+    return Li, fw, iv, dt, eps, iso

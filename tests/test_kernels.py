@@ -123,6 +123,36 @@ def test_trs_matrices_match_naive():
     np.testing.assert_allclose(PK.trs_matrices(t, q, s), naive.trs(t, q, s), atol=1e-12)
 
 
+@pytest.mark.parametrize("compiled", [True, False])
+def test_factor_terms_match_naive(compiled):
+    """The continuous certificate's per-(interval, joint) factor bounds, compiled, against their
+    numpy transcription: random rotations, non-uniform and sign-changing scales, a joint the clip
+    does not animate (its rest transform sheared), one zero scale."""
+    rng = np.random.default_rng(11)
+    T, J = 9, 5
+    anim = np.array([0, 1, 3, 4])
+    rest = naive.trs(rng.normal(size=(J, 3)), Rotation.random(J, random_state=3).as_quat(), rng.uniform(0.5, 2, (J, 3)))
+    rest[2, 0, 1] += 0.3  # sheared: not a similarity
+    t = rng.normal(size=(T, len(anim), 3))
+    q = Rotation.random(T * len(anim), random_state=4).as_quat().reshape(T, len(anim), 4) * rng.uniform(0.9, 1.1, (T, len(anim), 1))
+    s = rng.uniform(0.5, 1.5, (T, len(anim), 3))
+    s[:, 1] = s[:, 1, :1]          # uniform
+    s[4, 2, 1] *= -1               # a sign change
+    s[6, 3, 0] = 0.0               # a zero scale
+    s[:3, 0] = s[0, 0]             # constant over the first intervals
+    L = np.repeat(rest[None], T, 0)
+    L[:, anim] = naive.trs(t, q / np.linalg.norm(q, axis=-1, keepdims=True), s)
+    got = B.factor_terms(L, t, q, s, anim, rest, C.OMEGA_MARGIN, C.ALPHA_MARGIN, compiled=compiled)
+    want = naive.factor_terms(L, t, q, s, anim, rest, C.OMEGA_MARGIN, C.ALPHA_MARGIN)
+    ok = np.abs(np.linalg.det(L[..., :3, :3])) > 1e-12
+    np.testing.assert_allclose(got[0][ok], want[0][ok], rtol=1e-9, atol=1e-9)
+    for g, w, name in zip(got[1:], want[1:], ("fw", "iv", "dt", "eps", "iso")):
+        np.testing.assert_array_equal(np.isinf(g), np.isinf(w), err_msg=name)
+        fin = np.isfinite(w)
+        np.testing.assert_allclose(np.asarray(g)[fin], np.asarray(w)[fin], rtol=1e-9, atol=1e-12, err_msg=name)
+    assert np.isinf(got[2][5:7, 4]).all() and np.isinf(got[2][3:5, 3]).all() and not got[5][:, 2].any()
+
+
 # -- bounds: soundness against dense brute force ----------------------------------------------
 def random_rig(rng, J=6, n=400, F=6, angle=0.8, scale=False, tight=True):
     """A random joint tree, random points skinned to 1-4 nearby joints, one part per joint

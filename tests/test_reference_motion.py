@@ -374,11 +374,12 @@ def test_harness_catches_a_time_shift_and_a_unit_error(corpus, tmp_path):
 # =============================================================================== (b) the corpus
 #: measured on the issue-9 importer (``python -m tests.reference.diagnose``); see FINDINGS.md
 XFAIL = {
-    "realworld/godot_mannequiny.glb": "2.0e-4 x size at on-grid keys (120 fps): animated stretch scales (0.98..1.03 "
-                                      "on thighs/feet) are stored as UsdSkel's half3 scales, rounded by up to 2^-11 of "
-                                      "themselves; UsdSkel has no exact representation (FINDINGS F2, second part)",
-    "realworld/playcanvas_lumberjack.glb": "3.8e-4 x size at on-grid keys (120 fps): Rigify DEF stretch scales (0.97..1.03) "
-                                           "rounded to half3 (FINDINGS F2, second part)",
+    "realworld/godot_mannequiny.glb": "at on-grid keys 4.9e-5 (within 1e-4 since the writer corrects translations for "
+                                      "the rounded half3 stretch scales); halfway between frames 1.9e-4 .. 2.1e-4: "
+                                      "UsdSkel lerps half3 scales and rounds the result to half (FINDINGS F2, decided)",
+    "realworld/playcanvas_lumberjack.glb": "Rigify DEF stretch scales (0.97..1.03) down 5-bone chains: 1.8e-4 at keys "
+                                           "(stated storage bound 3.2e-4; was 3.8e-4), 4.3e-4 between frames, UsdSkel's "
+                                           "half3 scales (FINDINGS F2, decided)",
 }
 
 
@@ -387,17 +388,50 @@ def _case(name):
     return pytest.param(name, marks=marks, id=name.split("/")[-1])
 
 
-@pytest.mark.parametrize("name", [_case(n) for n in CHARACTERS])
-def test_corpus_character_moves_as_its_reference(corpus, tmp_path, name):
+#: corpus-relative name -> (asset path, FileReport): each character is imported and compared once
+_COMPARED = {}
+
+
+def _compared(corpus, tmp_path_factory, name):
     from pipeline.run import import_asset
 
-    src = corpus / name
-    ref = compare.reference_for(src)
-    out = tmp_path / (src.name + ".usda")
-    import_asset(src, out)
-    rep = compare.compare(src, out, max_instants=compare.MAX_INSTANTS, reference=ref)
+    if name not in _COMPARED:
+        src = corpus / name
+        ref = compare.reference_for(src)
+        out = tmp_path_factory.mktemp("ref") / (src.name + ".usda")
+        import_asset(src, out)
+        _COMPARED[name] = (out, compare.compare(src, out, max_instants=compare.MAX_INSTANTS, reference=ref))
+    return _COMPARED[name]
+
+
+@pytest.mark.parametrize("name", [_case(n) for n in CHARACTERS])
+def test_corpus_character_moves_as_its_reference(corpus, tmp_path_factory, name):
+    _, rep = _compared(corpus, tmp_path_factory, name)
     assert rep.reference_vertices > 0
     assert rep.problems() == []
+
+
+@pytest.mark.parametrize("name", list(XFAIL))
+def test_stretched_rig_stated_storage_bound_holds_at_keys(corpus, tmp_path_factory, name):
+    """The xfail characters' animated stretch scales: at the source's keys (on the asset's frames)
+    the error stays within the storage bound each clip states in its customData, and mannequiny's
+    within the 1e-4 the issue asks (the writer's translation correction; was 2.0e-4)."""
+    from pxr import Usd, UsdSkel
+
+    out, rep = _compared(corpus, tmp_path_factory, name)
+    stage = Usd.Stage.Open(str(out))
+    stated = {p.GetName(): float(p.GetCustomDataByKey("colossus:source")["storageErrorBoundRelative"])
+              for p in stage.Traverse() if p.IsA(UsdSkel.Animation)
+              and "storageErrorBoundRelative" in (p.GetCustomDataByKey("colossus:source") or {})}
+    checked = 0
+    for c in rep.clips:
+        if c.err_keys is None or c.asset_clip not in stated:
+            continue
+        assert c.err_keys <= stated[c.asset_clip] * 1.05 + 1e-6, (c.name, c.err_keys, stated[c.asset_clip])
+        checked += 1
+    assert checked > 0
+    if "mannequiny" in name:
+        assert rep.err_keys < 1e-4, rep.err_keys
 
 
 def test_reference_code_imports_nothing_of_the_project():

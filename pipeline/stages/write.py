@@ -200,6 +200,21 @@ def _storage_bound(norms: np.ndarray, joint_indices, joint_weights, dist, chunk:
     return out
 
 
+def _posed_size(mesh: SkinnedMesh, local: np.ndarray) -> float:
+    """The model size (:func:`pipeline.tolerances.model_scale`) of the vertices skinned by the
+    joint-local transforms ``local`` (b, 4, 4): the model as a clip moves it (bind-space positions
+    can be at another scale: lumberjack's mesh is authored in centimetres, bound by x100 binds,
+    and moved in metres)."""
+    from runtime.kernels.skin import skin_frames
+
+    from ..model import skel_transforms
+    from ..tolerances import model_scale
+
+    mats = skel_transforms(local, mesh.parents) @ np.linalg.inv(mesh.bind_transforms) @ mesh.geom_bind
+    return model_scale(skin_frames(mesh.positions, mesh.joint_indices, mesh.joint_weights, mats[None],
+                                   dtype=np.float64)[0])
+
+
 def stored_clips(mesh: SkinnedMesh) -> SkinnedMesh:
     """``mesh`` with every clip's joint-local transforms as the asset will store them.
 
@@ -211,14 +226,12 @@ def stored_clips(mesh: SkinnedMesh) -> SkinnedMesh:
     as the writer does, so it is not rounded.
 
     Each clip's ``clip_info`` entry (in ``mesh.source``) gets ``storage_error_relative``: the
-    bound of :func:`_store_clip` on how far storage moves any vertex, over the model size.
+    bound of :func:`_store_clip` on how far storage moves any vertex, over the model size (as the
+    clip's first frame poses it, :func:`_posed_size`).
     """
-    from ..tolerances import model_scale
-
     k = root_scale(mesh)
     roots = mesh.parents < 0
     centers, dist = _joint_local_points(mesh)
-    size = model_scale(mesh.positions.astype(np.float64) @ mesh.geom_bind[:3, :3].T)
     clips, bounds = [], {}
     for c in mesh.clips:
         local = c.local.copy()
@@ -226,7 +239,8 @@ def stored_clips(mesh: SkinnedMesh) -> SkinnedMesh:
         out, norms = _store_clip(local, mesh.parents, centers)
         out[:, roots, :3, :] *= k
         clips.append(type(c)(c.name, c.times, out))
-        bounds[c.name] = _storage_bound(norms, mesh.joint_indices, mesh.joint_weights, dist) * abs(k) / size
+        bounds[c.name] = (_storage_bound(norms, mesh.joint_indices, mesh.joint_weights, dist) * abs(k)
+                          / _posed_size(mesh, c.local[0]))
     info = [dict(i, storage_error_relative=bounds[i["name"]]) if i.get("name") in bounds else i
             for i in mesh.source.get("clip_info", [])]
     return mesh.replace(clips=tuple(clips), source=dict(mesh.source, clip_info=info))

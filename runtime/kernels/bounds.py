@@ -506,3 +506,218 @@ def _chord_block(t, p, vs, points, ji, jw, mats, centers, task_a, task_b, task_d
         arr[t] = vals[np.arange(len(t)), i]
         vout[t] = vs[i]
     out_u[t] *= (1.0 + ROUND)
+
+
+# -------------------------------------------------------------------- continuous-time factors
+@njit(cache=True)
+def _inv_affine_into(m, out):
+    """``out`` = inverse of the affine 4x4 ``m`` (last row 0 0 0 1), by the 3x3 adjugate."""
+    a00, a01, a02 = m[0, 0], m[0, 1], m[0, 2]
+    a10, a11, a12 = m[1, 0], m[1, 1], m[1, 2]
+    a20, a21, a22 = m[2, 0], m[2, 1], m[2, 2]
+    c00 = a11 * a22 - a12 * a21
+    c01 = a02 * a21 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    c10 = a12 * a20 - a10 * a22
+    c11 = a00 * a22 - a02 * a20
+    c12 = a02 * a10 - a00 * a12
+    c20 = a10 * a21 - a11 * a20
+    c21 = a01 * a20 - a00 * a21
+    c22 = a00 * a11 - a01 * a10
+    det = a00 * c00 + a01 * c10 + a02 * c20
+    inv = 1.0 / det if det != 0.0 else math.inf
+    out[0, 0], out[0, 1], out[0, 2] = c00 * inv, c01 * inv, c02 * inv
+    out[1, 0], out[1, 1], out[1, 2] = c10 * inv, c11 * inv, c12 * inv
+    out[2, 0], out[2, 1], out[2, 2] = c20 * inv, c21 * inv, c22 * inv
+    for r in range(3):
+        out[r, 3] = -(out[r, 0] * m[0, 3] + out[r, 1] * m[1, 3] + out[r, 2] * m[2, 3])
+    out[3, 0] = out[3, 1] = out[3, 2] = 0.0
+    out[3, 3] = 1.0
+
+
+@njit(cache=True)
+def _factor_terms(L, t, q, s, anim, omega_margin, alpha_margin, half_rel, Li, fw, iv, dt, eps, iso):
+    """The kernel of :func:`factor_terms` (no fastmath: infinities are meaningful here)."""
+    T, J = L.shape[0], L.shape[1]
+    for k in range(T):
+        for j in range(J):
+            _inv_affine_into(L[k, j], Li[k, j])
+    I, A = T - 1, anim.shape[0]
+    for i in range(I):
+        for k in range(A):
+            j = anim[k]
+            # rotation: GfSlerp's shortest arc between the normalised quaternions
+            n0 = math.sqrt(q[i, k, 0] ** 2 + q[i, k, 1] ** 2 + q[i, k, 2] ** 2 + q[i, k, 3] ** 2)
+            n1 = math.sqrt(q[i + 1, k, 0] ** 2 + q[i + 1, k, 1] ** 2 + q[i + 1, k, 2] ** 2 + q[i + 1, k, 3] ** 2)
+            dot = 0.0
+            for c in range(4):
+                dot += (q[i, k, c] / n0) * (q[i + 1, k, c] / n1)
+            sg = -1.0 if dot < 0.0 else 1.0
+            dm = 0.0
+            dp = 0.0
+            for c in range(4):
+                a0 = q[i, k, c] / n0
+                a1 = sg * q[i + 1, k, c] / n1
+                dm += (a0 - a1) ** 2
+                dp += (a0 + a1) ** 2
+            theta = 4.0 * math.atan2(math.sqrt(dm), math.sqrt(dp))
+            om = omega_margin * theta
+            al = alpha_margin * theta * theta
+            # scales: lerped; extremes at the ends, a sign change makes the inverse unbounded
+            smax = 0.0
+            smin = math.inf
+            ds = 0.0
+            flip = False
+            u0 = True
+            u1 = True
+            for c in range(3):
+                x0, x1 = s[i, k, c], s[i + 1, k, c]
+                smax = max(smax, abs(x0), abs(x1))
+                smin = min(smin, abs(x0), abs(x1))
+                ds = max(ds, abs(x1 - x0))
+                if (x0 > 0.0) != (x1 > 0.0) or (x0 == 0.0) != (x1 == 0.0) or (x0 < 0.0) != (x1 < 0.0):
+                    flip = True
+                if x0 != s[i, k, 0]:
+                    u0 = False
+                if x1 != s[i + 1, k, 0]:
+                    u1 = False
+            if flip:
+                smin = 0.0
+            inv_s = 1.0 / smin if smin > 0.0 else math.inf
+            fw[i, j, 0] = smax
+            fw[i, j, 1] = om * smax + ds
+            fw[i, j, 2] = al * smax + 2.0 * om * ds
+            if smin > 0.0:
+                iv[i, j, 0] = inv_s
+                iv[i, j, 1] = ds * inv_s * inv_s + om * inv_s
+                iv[i, j, 2] = 2.0 * ds * ds * inv_s ** 3 + 2.0 * om * ds * inv_s * inv_s + al * inv_s
+            else:
+                iv[i, j, 0] = iv[i, j, 1] = iv[i, j, 2] = math.inf
+            dt[i, j] = math.sqrt((t[i + 1, k, 0] - t[i, k, 0]) ** 2 + (t[i + 1, k, 1] - t[i, k, 1]) ** 2
+                                 + (t[i + 1, k, 2] - t[i, k, 2]) ** 2)
+            e = half_rel * smax if ds > 0.0 else 0.0
+            eps[i, j, 0] = e
+            if e > 0.0:
+                eps[i, j, 1] = e / (smin * (smin - e)) if smin > e else math.inf
+            else:
+                eps[i, j, 1] = 0.0
+            iso[i, j] = u0 and u1
+
+
+#: Below this many (interval, joint) pairs :func:`factor_terms` runs vectorised numpy instead of
+#: the compiled kernel: a demo-sized clip is done in well under a millisecond either way, and not
+#: compiling saves ~1.5 s of a cold start (``tools/compile-profile``); the benchmark's 500 frames x
+#: 40 joints take the kernel (4x faster there).
+FACTOR_KERNEL_MIN = 8_000
+
+
+def factor_terms(L, t, q, s, anim, rest_local, omega_margin: float, alpha_margin: float, compiled=None):
+    """Per sample interval and joint, the factor bounds of the continuous certificate
+    (:func:`runtime.certify.factor_bounds` documents and proves them).
+
+    Parameters
+    ----------
+    L : (T, J, 4, 4) float64 joint-local transforms at the samples; t, q, s : (T, A, 3 | 4 | 3)
+    the animated joints' translations, (x, y, z, w) rotations and scales there; anim : (A,) int
+    their joint indices; rest_local : (J, 4, 4) the other joints' constant transforms.
+
+    Returns
+    -------
+    Li (T, J, 4, 4) the inverses of ``L``; fw, iv (I, J, 3) forward / inverse ``(n0, n1, n2)``;
+    dt (I, J); eps (I, J, 2); iso (I, J) bool (I = T - 1).  ``compiled``: force the kernel (True)
+    or the numpy path (False); default by size (:data:`FACTOR_KERNEL_MIN`).  Both are checked
+    against the loop reference ``tests/naive.py:factor_terms``.
+    """
+    L = np.ascontiguousarray(L, dtype=np.float64)
+    T, J = L.shape[:2]
+    I = max(T - 1, 0)
+    lin = np.asarray(rest_local, dtype=np.float64)[:, :3, :3]
+    sv = np.linalg.svd(lin, compute_uv=False)
+    fw, iv = np.zeros((I, J, 3)), np.zeros((I, J, 3))
+    fw[:, :, 0] = (sv[:, 0] * (1 + 1e-12))[None]
+    with np.errstate(divide="ignore"):
+        iv[:, :, 0] = (np.where(sv[:, -1] > 0, 1.0 / sv[:, -1], np.inf) * (1 + 1e-12))[None]
+    iso = np.repeat((sv[:, 0] - sv[:, -1] <= 1e-12 * sv[:, 0])[None], I, 0)
+    dt, eps = np.zeros((I, J)), np.zeros((I, J, 2))
+    f64 = (lambda a: np.ascontiguousarray(a, dtype=np.float64))
+    anim = np.ascontiguousarray(anim, dtype=np.int64)
+    if compiled is None:
+        compiled = I * J >= FACTOR_KERNEL_MIN
+    if compiled:
+        Li = np.empty_like(L)
+        _factor_terms(L, f64(t), f64(q), f64(s), anim, float(omega_margin), float(alpha_margin), HALF_LERP_REL,
+                      Li, fw, iv, dt, eps, iso)
+    else:
+        Li = _inv_affine_numpy(L)
+        if len(anim) and I > 0:
+            _factor_terms_numpy(f64(t), f64(q), f64(s), anim, float(omega_margin), float(alpha_margin),
+                                fw, iv, dt, eps, iso)
+    return Li, fw, iv, dt, eps, iso
+
+
+#: UsdSkel lerps half3 scales in half precision: three roundings, each within 2^-11 of the value.
+HALF_LERP_REL = 3.0 * 2.0 ** -11
+
+
+def _norm_last(x):
+    """Euclidean norms over the last axis (``np.linalg.norm(x, axis=-1)`` without its overhead)."""
+    return np.sqrt(np.einsum("...k,...k->...", x, x))
+
+
+def _max3(x):
+    """Largest of the last axis (length 3): numpy reduces such short axes slowly."""
+    return np.maximum(np.maximum(x[..., 0], x[..., 1]), x[..., 2])
+
+
+def _min3(x):
+    return np.minimum(np.minimum(x[..., 0], x[..., 1]), x[..., 2])
+
+
+def _inv_affine_numpy(L):
+    """:func:`_inv_affine_into` vectorised over (..., 4, 4), component by component."""
+    m = [[L[..., i, j] for j in range(3)] for i in range(3)]
+    adj = [[m[1][1] * m[2][2] - m[1][2] * m[2][1], m[0][2] * m[2][1] - m[0][1] * m[2][2],
+            m[0][1] * m[1][2] - m[0][2] * m[1][1]],
+           [m[1][2] * m[2][0] - m[1][0] * m[2][2], m[0][0] * m[2][2] - m[0][2] * m[2][0],
+            m[0][2] * m[1][0] - m[0][0] * m[1][2]],
+           [m[1][0] * m[2][1] - m[1][1] * m[2][0], m[0][1] * m[2][0] - m[0][0] * m[2][1],
+            m[0][0] * m[1][1] - m[0][1] * m[1][0]]]
+    det = m[0][0] * adj[0][0] + m[0][1] * adj[1][0] + m[0][2] * adj[2][0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_det = np.where(det != 0.0, 1.0 / np.where(det != 0.0, det, 1.0), np.inf)
+    out = np.zeros_like(L)
+    t = [L[..., i, 3] for i in range(3)]
+    with np.errstate(invalid="ignore"):
+        for i in range(3):
+            for j in range(3):
+                out[..., i, j] = adj[i][j] * inv_det
+            out[..., i, 3] = -(out[..., i, 0] * t[0] + out[..., i, 1] * t[1] + out[..., i, 2] * t[2])
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def _factor_terms_numpy(t, q, s, a, omega_margin, alpha_margin, fw, iv, dt, eps, iso):
+    """:func:`_factor_terms`'s interval loop, vectorised (fills the animated joints' columns)."""
+    qn = q / _norm_last(q)[..., None]
+    q0, q1 = qn[:-1], qn[1:]
+    sq1 = np.where(np.einsum("iak,iak->ia", q0, q1) < 0, -1.0, 1.0)[..., None] * q1
+    theta = 4.0 * np.arctan2(_norm_last(q0 - sq1), _norm_last(q0 + sq1))
+    om = omega_margin * theta
+    al = alpha_margin * theta ** 2
+    sa = np.abs(s)
+    smax = np.maximum(_max3(sa[:-1]), _max3(sa[1:]))
+    smin = np.minimum(_min3(sa[:-1]), _min3(sa[1:]))
+    smin = np.where(_max3(np.sign(s[:-1]) != np.sign(s[1:])), 0.0, smin)
+    ds = _max3(np.abs(s[1:] - s[:-1]))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        inv_s = np.where(smin > 0, 1.0 / np.where(smin > 0, smin, 1.0), np.inf)
+        fw[:, a] = np.stack([smax, om * smax + ds, al * smax + 2 * om * ds], -1)
+        ivs = np.stack([inv_s, ds * inv_s ** 2 + om * inv_s,
+                        2 * ds ** 2 * inv_s ** 3 + 2 * om * ds * inv_s ** 2 + al * inv_s], -1)
+        iv[:, a] = np.where((smin > 0)[..., None] & np.isfinite(ivs), ivs, np.inf)
+        dt[:, a] = _norm_last(t[1:] - t[:-1])
+        e = np.where(ds > 0, HALF_LERP_REL * smax, 0.0)
+        ei = np.where(e > 0, e / np.where(e > 0, smin * (smin - e), 1.0), 0.0)
+    iso[:, a] = (_max3(s[:-1]) == _min3(s[:-1])) & (_max3(s[1:]) == _min3(s[1:]))  # uniform at both ends
+    eps[:, a, 0] = e
+    eps[:, a, 1] = np.where((e > 0) & ~(smin > e), np.inf, ei)

@@ -563,7 +563,11 @@ def compare(source, asset, max_instants: int = MAX_INSTANTS, reference: Referenc
         gm = got[:, np.where(cm >= 0, cm, 0)]  # (T, R, k, 3)
         dist = np.linalg.norm(gm - rm[:, :, None, :], axis=-1)  # (T, R, k)
         dist = np.where((cm >= 0)[None], dist, np.inf)
-        choose = np.argmin(dist.max(axis=0), axis=1)  # per reference vertex: the best-moving candidate
+        # per reference vertex, the best-moving candidate at the key instants, where the asset
+        # must agree exactly (co-located vertices with other weights are the other candidates;
+        # choosing over the mid-key instants too would let their larger errors pick a wrong twin)
+        sel = dist[is_key] if is_key.any() else dist
+        choose = np.argmin(sel.max(axis=0), axis=1)
         err = np.take_along_axis(dist, choose[None, :, None], axis=2)[..., 0] / rep.size  # (T, R)
         per_t = err.max(axis=1)
         cr.key_instants, cr.mid_instants = int(is_key.sum()), int((~is_key).sum())
