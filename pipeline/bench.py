@@ -89,3 +89,38 @@ def bench_scaling(sizes=(50_000, 200_000, 800_000), echo=print):
         echo(f"  {len(faces):>10} {tw:8.3f} {to:9.3f} {tw / nlogn / base[0]:15.2f} {to / nlogn / base[1]:17.2f}")
     echo("  (columns 4-5: time per n log n relative to the smallest size; <= ~1 means no worse than n log n)")
     return rows
+
+
+def bench_simplify(triangles=200_000, target=5_000, bones=60, clips=2, frames=120, echo=print):
+    """The 200,000-triangle tube reduced to ``target`` faces: the simplify stage (decimation and the
+    deviation over every frame) beside the rest of the import, and a game frame (pose + 1 sphere
+    + 16 rays, :func:`runtime.bench.game_frame`) on the proxy vs on the full mesh."""
+    from runtime import load_collider
+    from runtime.bench import _median_time, game_frame
+
+    from .run import ImportSettings, import_asset
+    from .synth.glb import write_glb
+
+    with tempfile.TemporaryDirectory() as tmp:
+        small = os.path.join(tmp, "warm.glb")
+        write_glb(small, 2_000, 8, 1, 10)
+        import_asset(small, os.path.join(tmp, "warm.usda"), ImportSettings(target_faces=500))
+        src = os.path.join(tmp, "bench.glb")
+        nv, nf = write_glb(src, triangles, bones, clips, frames)
+        full = import_asset(src, os.path.join(tmp, "full.usda"))
+        prox = import_asset(src, os.path.join(tmp, "proxy.usda"), ImportSettings(target_faces=target))
+        cf, cp = load_collider(os.path.join(tmp, "full.usda")), load_collider(os.path.join(tmp, "proxy.usda"))
+        clip = cf.clips[0]
+        tf = _median_time(game_frame(cf, clip), 50)
+        tp = _median_time(game_frame(cp, clip), 50)
+    rep = {r.stage: r for r in prox.reports}
+    c = rep["simplify"].counts
+    rest = sum(r.seconds for r in prox.reports if r.stage != "simplify")
+    echo(f"simplify: {nf} triangles -> {c['faces_out']} ({bones} bones, {clips} clips x {frames} frames)")
+    echo(f"  decimation (collapses, repair, skin transfer) {c['decimate_seconds']:8.3f} s")
+    echo(f"  deviation over all {1 + clips * frames} poses          {c['deviation_seconds']:8.3f} s   "
+         f"(bound {c['deviation']:.4g} = {100 * c['deviation_relative']:.3g}% of size)")
+    echo(f"  rest of the import                            {rest:8.3f} s   (full import {full.seconds:.3f} s)")
+    echo(f"  game frame: full {tf * 1e3:.3f} ms, proxy {tp * 1e3:.3f} ms = {tf / tp:.1f}x faster on the proxy")
+    return {"faces_out": c["faces_out"], "decimate_s": c["decimate_seconds"], "deviation_s": c["deviation_seconds"],
+            "rest_s": rest, "full_import_s": full.seconds, "frame_full_s": tf, "frame_proxy_s": tp}

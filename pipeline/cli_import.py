@@ -46,6 +46,9 @@ def _stage_line(rep) -> str:
         return f"{c['parts']} parts ({c['mode']}), {len(c.get('folded_joints', []))} joints folded"
     if s == "spheres":
         return f"max radius {_num(c['max_radius'], '.4g')}, max slack x{_num(c['max_slack_ratio'], '.3f')}"
+    if s == "simplify":
+        return (f"{c['faces_in']} -> {c['faces_out']} faces, {c['closed_shells_out']}/{c['closed_shells_in']} closed shells "
+                f"closed, deviation <= {_num(c['deviation'], '.4g')} ({_num(None if c['deviation_relative'] is None else 100 * c['deviation_relative'], '.3g')}% of size)")
     if s == "write":
         return f"{c['path']} ({c['bytes']} bytes)"
     return ""
@@ -75,9 +78,36 @@ def format_summary(result) -> str:
                          f"{g / p['radius'] if p.get('radius') else 0.0:>9.2%}")
         lines.append("  (radius in joint space; slack = radius / tightest per-frame sphere; growth = how much of "
                      "the radius covers motion between frames beyond the frames' minimal sphere)")
+    simp = next((r for r in result.reports if r.stage == "simplify"), None)
+    if simp is not None:
+        lines.append("")
+        lines += proxy_lines(simp)
     for w in s["warnings"]:
         lines.append(f"warning: {w}")
     return "\n".join(lines)
+
+
+def proxy_lines(rep) -> list:
+    """The collision proxy's deviation: the bound, where the largest distance was measured
+    (clip, frame, bone), and a table per clip."""
+    c = rep.counts
+    w = c["worst"]
+    if not w["bone"]:
+        return [f"  proxy: {c['faces_in']} -> {c['faces_out']} faces: the full mesh (deviation 0)"]
+    where = "the bind pose" if w["frame"] in (-1, None) else f"clip {w['clip']} frame {w['frame']}"
+    out = [f"  proxy: {c['faces_in']} -> {c['faces_out']} faces ({c['vertices_out']} vertices); deviation <= "
+           f"{c['deviation']:.4g}; largest measured {w['measured']:.4g} at {where}, bone {w['bone']} ({w['direction']})"]
+    clips = rep.details.get("clips", [])
+    if clips:
+        out.append(f"  {'clip':<24} {'frames':>6} {'deviation <=':>12} {'measured':>10} {'at frame':>8}")
+        for r in clips:
+            out.append(f"  {str(r['clip'])[:24]:<24} {r['frames']:>6} {r['deviation']:>12.4g} {r['measured']:>10.4g} "
+                       f"{r['frame']:>8}")
+        out.append(f"  {'(bind pose)':<24} {1:>6} {rep.details.get('bind_pose_deviation', 0):>12.4g} "
+                   f"{rep.details.get('bind_pose_measured', 0):>10.4g} {'':>8}")
+        out.append("  (deviation: upper bound of the two-sided distance between the proxy and the full skinned mesh, "
+                   "stage units; measured: the largest distance found between them)")
+    return out
 
 
 #: Storage error bounds below this (relative to the model size) are float32 noise, not shown.
@@ -136,6 +166,11 @@ def _source_lines(read_rep, mesh=None) -> list:
               help="Override the up axis the reader assumes for the source.")
 @click.option("--source-meters-per-unit", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Override the units the reader assumes for the source.")
+@click.option("--target-faces", type=click.IntRange(min=4), default=None, metavar="N",
+              help="Simplify the collision mesh to at most N triangles (a collision proxy; off by default).")
+@click.option("--max-deviation", default=None, metavar="D",
+              help="Simplify while the proxy stays within D of the full skinned mesh on every frame "
+                   "(stage units, or D% of the model size).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--progress/--no-progress", default=None,
               help="Show a progress bar on stderr (default: for large inputs on a terminal).")
@@ -145,12 +180,12 @@ def _source_lines(read_rep, mesh=None) -> list:
               help="Several inputs: run on a Dask cluster (tcp://host:8786, or local:N; needs colossus[dask]).")
 @maps_errors(input_status=1)
 def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, parts_mode, parts_threshold,
-               min_part_faces, meshes, fps, source_up_axis, source_meters_per_unit, as_json, progress, jobs,
-               scheduler):
+               min_part_faces, meshes, fps, source_up_axis, source_meters_per_unit, target_faces, max_deviation,
+               as_json, progress, jobs, scheduler):
     """Import the Blender export SRC and write the collider asset OUT.
 
     \b
-    Stages: read, bake, weld, orient, bind, parts, spheres, write.
+    Stages: read, bake, weld, orient, bind, [simplify], parts, spheres, write.
     Exit status: 0 written; 1 the input is unusable (nothing written); 2 usage.
 
     \b
@@ -170,7 +205,7 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
         unweighted=unweighted, parts=parts_mode, min_part_faces=min_part_faces,
         parts_threshold=parts_threshold, meshes=list(meshes), fps=fps,
         source_up_axis=source_up_axis.upper() if source_up_axis else None,
-        source_meters_per_unit=source_meters_per_unit,
+        source_meters_per_unit=source_meters_per_unit, target_faces=target_faces, max_deviation=max_deviation,
     )
     from .engine import is_glob
     from .stages.write import OUTPUT_EXTENSIONS
@@ -196,7 +231,8 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
         click.echo(("\r" + line.ljust(60)) if tty else line, err=True, nl=not tty)
 
     result = import_asset(src, out, settings, progress=on_stage)
-    on_stage(8, 8, "done")
+    n = len(settings.stages())
+    on_stage(n, n, "done")
     if progress and tty:
         click.echo("", err=True)
     if as_json:

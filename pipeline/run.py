@@ -1,4 +1,6 @@
-"""The import stage chained in one visible place: read -> bake -> weld -> orient -> bind -> parts -> spheres -> write."""
+"""The import stage chained in one visible place: read -> bake -> weld -> orient -> bind -> [simplify] -> parts -> spheres -> write.
+
+``simplify`` runs only with ``--target-faces`` / ``--max-deviation`` (a collision proxy)."""
 
 from __future__ import annotations
 
@@ -18,13 +20,16 @@ from .stages.bake import bake
 from .stages.bind import UNWEIGHTED_POLICIES, bind
 from .stages.orient import orient
 from .stages.parts import parts
+from .stages.simplify import parse_max_deviation, simplify
 from .stages.spheres import spheres
 from .stages.weld import weld
 from .stages.write import check_output_path, stored_clips, write
 from .tolerances import LARGEST_COORDINATE, PARTS_ANY_THRESHOLD, RESAMPLING_RELATIVE
 from .xforms import degenerate
 
-STAGES = ("read", "bake", "weld", "orient", "bind", "parts", "spheres", "write")
+STAGES = ("read", "bake", "weld", "orient", "bind", "simplify", "parts", "spheres", "write")
+#: Stages that run only when asked for.
+OPTIONAL_STAGES = ("simplify",)
 
 
 @dataclass
@@ -42,6 +47,17 @@ class ImportSettings:
     fps: float | None = None
     source_up_axis: str | None = None
     source_meters_per_unit: float | None = None
+    target_faces: int | None = None
+    max_deviation: str | None = None
+
+    @property
+    def proxy(self) -> bool:
+        """A simplified collision proxy was asked for."""
+        return self.target_faces is not None or self.max_deviation not in (None, "")
+
+    def stages(self) -> tuple:
+        """The stages this import runs, in order."""
+        return tuple(s for s in STAGES if s not in OPTIONAL_STAGES or (s == "simplify" and self.proxy))
 
     def check(self) -> None:
         if self.up_axis not in ("Y", "Z"):
@@ -60,6 +76,9 @@ class ImportSettings:
             raise UsageError(f"--fps must be positive, got {self.fps}")
         if self.source_meters_per_unit is not None and not (self.source_meters_per_unit > 0):
             raise UsageError("--source-meters-per-unit must be positive")
+        if self.target_faces is not None and self.target_faces < 4:
+            raise UsageError(f"--target-faces must be at least 4, got {self.target_faces}")
+        parse_max_deviation(self.max_deviation)
 
 
 @dataclass
@@ -87,6 +106,23 @@ class ImportResult:
             "stages": {rep.stage: {"counts": rep.counts, **({"details": rep.details} if rep.details else {})}
                        for rep in self.reports},
         }
+
+
+def proxy_provenance(report) -> dict:
+    """The ``customData["colossus"]["proxy"]`` dictionary of a simplified proxy (key paths
+    :data:`runtime.schema.PROXY_SOURCE_FACES`, :data:`~runtime.schema.PROXY_MAX_DEVIATION`, ...)."""
+    from runtime import schema
+
+    c = report.counts
+    w = c["worst"]
+    out = {}
+    for key, value in ((schema.PROXY_SOURCE_FACES, int(c["faces_in"])),
+                       (schema.PROXY_MAX_DEVIATION, float(c["deviation"])),
+                       (schema.PROXY_MEASURED_DEVIATION, float(c["sampled_deviation"])),
+                       (schema.PROXY_WORST_CLIP, str(w["clip"])), (schema.PROXY_WORST_FRAME, int(w["frame"])),
+                       (schema.PROXY_WORST_BONE, str(w["bone"])), (schema.PROXY_WORST_DIRECTION, str(w["direction"]))):
+        out[key.split(":")[-1]] = value
+    return out
 
 
 def mesh_provenance(info: list) -> dict:
@@ -204,18 +240,23 @@ def read_baked(src, settings: ImportSettings | None = None) -> SkinnedMesh:
     return bake(m, s.up_axis, s.meters_per_unit)[0]
 
 
-def build_collider(src, settings: ImportSettings | None = None, progress=None):
+def build_collider(src, settings: ImportSettings | None = None, progress=None, stop_after: str | None = None):
     """Run every stage but ``write``: returns ``(mesh, reports)``.
 
-    ``progress(i, n, stage)`` is called before each stage when given.
+    ``progress(i, n, stage)`` is called before each stage when given.  ``stop_after`` ends the
+    run after that stage (``"bind"``: the full mesh a proxy is simplified from; ``"simplify"``:
+    the proxy, or the full mesh when the settings ask for none).
     """
+    if stop_after not in (None, "bind", "simplify"):
+        raise ValueError(f"stop_after: expected None, 'bind' or 'simplify', got {stop_after!r}")
     s = settings or ImportSettings()
     s.check()
     reports = []
+    names = s.stages()
 
-    def step(i, name, fn):
+    def step(name, fn):
         if progress:
-            progress(i, len(STAGES), name)
+            progress(names.index(name), len(names), name)
         t0 = time.perf_counter()
         out = fn()
         rep = out[1]
@@ -245,14 +286,20 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None):
         rep.warnings.extend(read_warnings(m))
         return m, rep
 
-    mesh = step(0, "read", do_read)
-    mesh = step(1, "bake", lambda: bake(mesh, s.up_axis, s.meters_per_unit))
-    mesh = step(2, "weld", lambda: weld(mesh))
-    mesh = step(3, "orient", lambda: orient(mesh))
-    mesh = step(4, "bind", lambda: bind(mesh, s.max_influences, s.unweighted))
-    mesh = step(5, "parts", lambda: parts(mesh, s.parts, s.min_part_faces, s.parts_threshold))
+    mesh = step("read", do_read)
+    mesh = step("bake", lambda: bake(mesh, s.up_axis, s.meters_per_unit))
+    mesh = step("weld", lambda: weld(mesh))
+    mesh = step("orient", lambda: orient(mesh))
+    mesh = step("bind", lambda: bind(mesh, s.max_influences, s.unweighted))
+    if stop_after == "bind":
+        return mesh, reports
+    if s.proxy:
+        mesh = step("simplify", lambda: simplify(mesh, s.target_faces, s.max_deviation, s.max_influences))
+    if stop_after == "simplify":
+        return mesh, reports
+    mesh = step("parts", lambda: parts(mesh, s.parts, s.min_part_faces, s.parts_threshold))
     # on the clips as the asset stores them (half-precision scales), so the spheres hold for it
-    mesh = step(6, "spheres", lambda: spheres(stored_clips(mesh)))
+    mesh = step("spheres", lambda: spheres(stored_clips(mesh)))
     return mesh, reports
 
 
@@ -270,7 +317,7 @@ def import_asset(src, out, settings: ImportSettings | None = None, progress=None
     check_output_path(out)  # fail before the expensive work
     mesh, reports = build_collider(src, s, progress)
     if progress:
-        progress(7, len(STAGES), "write")
+        progress(len(s.stages()) - 1, len(s.stages()), "write")
     t1 = time.perf_counter()
     provenance = {
         "source": os.path.basename(os.fspath(src)), "sourceSha256": sha256_of(src),
@@ -279,6 +326,9 @@ def import_asset(src, out, settings: ImportSettings | None = None, progress=None
         "settings": {k: ("" if v is None else v) for k, v in asdict(s).items()},
         "meshes": mesh_provenance(mesh.source.get("mesh_info", [])),
     }
+    simp = next((r for r in reports if r.stage == "simplify"), None)
+    if simp is not None:
+        provenance["proxy"] = proxy_provenance(simp)
     mesh, rep = write(mesh, out, provenance)
     rep.seconds = time.perf_counter() - t1
     reports.append(rep)

@@ -54,3 +54,24 @@ def model_scale(points: np.ndarray) -> float:
     hi = np.max(points, axis=0).astype(np.float64)
     d = float(np.linalg.norm(hi - lo))
     return d if np.isfinite(d) and d > 0 else 1.0
+
+
+#: ``simplify``: height of the step (in mean edge lengths around each vertex) between
+#: neighbouring parts in the embedding the decimator chooses its collapses on.  A collapse across
+#: a part boundary must leave the step, which costs about its height squared in the quadric
+#: error, so such collapses wait until the mesh around is coarse enough (Unreal's "enforce bone
+#: boundaries" as a penalty, not a wall; dropped when it keeps the proxy above its target).
+SIMPLIFY_BONE_BOUNDARY = 0.5
+#: ``simplify``: split a deviation piece (a source triangle or part of one) while its upper bound
+#: is more than this fraction above the largest distance sampled (the bound then over-states the
+#: largest distance found by at most this much, plus the resolution below).
+DEVIATION_REFINE = 0.3
+#: ``simplify``: added to the deviation bound (times the model size) for the float32 rounding of
+#: stored positions and weights.
+DEVIATION_PAD = 1e-6
+#: ``simplify``: the deviation is resolved to this (times the model size): a piece whose bound is
+#: within this of the threshold above is not split further.
+DEVIATION_RESOLUTION = 1e-4
+#: ``simplify``: a deviation piece is split at most this many times (its cover radius halves each
+#: time); a piece at this depth keeps its bound, which stays an upper bound.
+DEVIATION_MAX_DEPTH = 6

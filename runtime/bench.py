@@ -175,6 +175,41 @@ def _median_time(fn, repeat, warm=3):
     return float(np.median(ts))
 
 
+def game_frame_queries(pose, size, rng):
+    """The queries of one game frame around a player standing on the model's highest point of
+    ``pose``: ``(player (3,), radius, origins (16, 3), directions (16, 3))``: a player sphere of
+    radius 3.5% of the model size, 8 ground probes in a downward fan (2 radii long) and 8 camera
+    rays from 6 radii behind and above the player towards its surroundings."""
+    r = 0.035 * size
+    player = pose.points[int(np.argmax(pose.points[:, 1]))].astype(np.float64) + [0, 0.5 * r, 0]
+    ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    fan = np.c_[0.4 * np.cos(ang), -np.ones(8), 0.4 * np.sin(ang)]
+    cam = player + [-6 * r, 3 * r, 0.5 * r]
+    look = player + rng.normal(scale=r, size=(8, 3))
+    o = np.r_[np.repeat(player[None], 8, 0), np.repeat(cam[None], 8, 0)]
+    dirs = np.r_[fan, look - cam]
+    return player, r, o, dirs
+
+
+def game_frame(col, clip, seed=0):
+    """A callable running one game frame on ``col`` as row 2 of :func:`run_bench` measures it:
+    the pose at a new time of ``clip``, one player sphere contact query and 16 rays
+    (:func:`game_frame_queries`)."""
+    rng = np.random.default_rng(seed)
+    times = col.frame_times(clip)
+    ts = iter(rng.uniform(times[0], times[-1], 10 ** 6))
+    pose = col.pose(clip, float(times[len(times) // 2]))
+    player, r, o, dirs = game_frame_queries(pose, col.size(), rng)
+
+    def frame():
+        p = col.pose(clip, next(ts), out=pose)
+        p.sphere_contacts(player, r)
+        p.raycast(o[:8], dirs[:8], 2 * r)
+        p.raycast(o[8:], dirs[8:])
+
+    return frame
+
+
 def run_bench(path=None, repeat=50):
     """Run the three benchmarks; returns rows of dicts ``name, ours_s, baseline_s, speedup,
     goal, met, note`` (times in seconds, this machine's)."""
@@ -215,17 +250,8 @@ def run_bench(path=None, repeat=50):
 
     # -- 2: a game frame
     size = col.size()
-    r = 0.035 * size
     pose = col.pose("wave", 10.0, out=pose)
-    player = pose.points[int(np.argmax(pose.points[:, 1]))].astype(np.float64) + [0, 0.5 * r, 0]
-    # 16 rays a game casts around the player: 8 ground probes in a downward fan (2 radii long)
-    # and 8 camera rays from 6 radii behind and above the player towards its surroundings
-    ang = np.linspace(0, 2 * np.pi, 8, endpoint=False)
-    fan = np.c_[0.4 * np.cos(ang), -np.ones(8), 0.4 * np.sin(ang)]
-    cam = player + [-6 * r, 3 * r, 0.5 * r]
-    look = player + rng.normal(scale=r, size=(8, 3))
-    o = np.r_[np.repeat(player[None], 8, 0), np.repeat(cam[None], 8, 0)]
-    dirs = np.r_[fan, look - cam]
+    player, r, o, dirs = game_frame_queries(pose, size, rng)
     # the same number of rays crossing the whole model (worst case, reported as row 4)
     o_wide = player[None] + rng.normal(scale=0.2 * size, size=(16, 3)) + [0, size * 0.3, 0]
     d_wide = pose.points[rng.integers(0, len(pose.points), 16)] - o_wide

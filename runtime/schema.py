@@ -42,9 +42,21 @@ CLIP_NAME_KEY = "colossus:clipName"
 #: A SkelAnimation's customData key describing how the clip was sampled from its source
 #: (``sourceKeys``, ``interpolation``, ``sampling``, ``keysOnGrid``, ``errorBound`` stage units).
 CLIP_SOURCE_KEY = "colossus:source"
-#: Provenance keys of a simplified collision proxy (issue: collision proxy).
+#: Provenance keys of a simplified collision proxy (issue: collision proxy).  They are customData
+#: *key paths* (``GetCustomDataByKey``): ``customData["colossus"]["proxy"]["sourceFaces"]`` etc.,
+#: inside the provenance dictionary.  ``maxDeviation``: stage units, an upper bound of the
+#: two-sided distance between the proxy and the full skinned mesh on the bind pose and every
+#: frame of every clip; ``measuredDeviation``: the largest distance actually measured between
+#: them (the bound is at most ``1 + DEVIATION_REFINE`` times it, plus a small resolution, where
+#: the subdivision depth sufficed); the ``worst*`` keys say where that was measured.
+PROXY_KEY = PROVENANCE_KEY + ":proxy"
 PROXY_SOURCE_FACES = "colossus:proxy:sourceFaces"
 PROXY_MAX_DEVIATION = "colossus:proxy:maxDeviation"
+PROXY_MEASURED_DEVIATION = "colossus:proxy:measuredDeviation"
+PROXY_WORST_CLIP = "colossus:proxy:worstClip"
+PROXY_WORST_FRAME = "colossus:proxy:worstFrame"
+PROXY_WORST_BONE = "colossus:proxy:worstBone"
+PROXY_WORST_DIRECTION = "colossus:proxy:worstDirection"
 
 #: Prim names under the SkelRoot.
 SKELETON_NAME = "Skeleton"

@@ -328,6 +328,114 @@ def min_sphere_bounds(points):
     return center, min(lower, upper), upper
 
 
+# -- simplify: edge collapses -----------------------------------------------------------------
+
+def interior_vertices(triangles, n):
+    """Vertices whose star is a closed disk: every incident edge in exactly two faces, opposite
+    directions, and the faces around the vertex one cycle (walked face to face)."""
+    uses = edge_uses(triangles)
+    tris = [tuple(int(v) for v in t) for t in np.asarray(triangles)]
+    out = np.zeros(n, bool)
+    for v in {int(x) for t in tris for x in t}:
+        faces = [f for f, t in enumerate(tris) if v in t]
+        edges = [e for e in uses if v in e]
+        if any(len(uses[e]) != 2 or uses[e][0][1] == uses[e][1][1] for e in edges):
+            continue
+        # walk the fan: from a face, cross the edge (v, w) to the other face of it
+        seen, f = set(), faces[0]
+        while f not in seen:
+            seen.add(f)
+            t = tris[f]
+            w = t[(t.index(v) + 1) % 3]
+            f = next(g for g, _ in uses[(min(v, w), max(v, w))] if g != f)
+        out[v] = len(seen) == len(faces)
+    return out
+
+
+def apply_collapses(positions, triangles, collapses, stop_faces=0, limit=None, vertex_shell=None, min_cos=0.2,
+                    reg=1e-3):
+    """Replay ``collapses`` with the rules of :mod:`pipeline.geometry.collapse`, on python sets.
+
+    Returns ``(positions (n, 3) of every vertex, live triangles (list of tuples), accepted
+    (k,) bool)``."""
+    P = np.asarray(positions, dtype=np.float64).copy()
+    n = len(P)
+    tris = {f: [int(v) for v in t] for f, t in enumerate(np.asarray(triangles))}
+    locked = ~interior_vertices(triangles, n)
+    # area-weighted plane quadrics, each face's area shared by its three corners
+    A, b, w = np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros(n)
+    for t in tris.values():
+        cr = np.cross(P[t[1]] - P[t[0]], P[t[2]] - P[t[0]])
+        area = 0.5 * np.linalg.norm(cr)
+        nrm = cr / (2 * area) if area > 0 else cr
+        for v in t:
+            A[v] += area / 3 * np.outer(nrm, nrm)
+            b[v] += area / 3 * (nrm @ P[t[0]]) * nrm
+            w[v] += area / 3
+    C = P.copy()                              # cluster centroids
+    R = np.zeros(n)                           # cluster radius bounds
+    shell = np.zeros(n, np.int64) if vertex_shell is None else np.asarray(vertex_shell)
+    members = {}
+    for t in tris.values():
+        for v in t:
+            members.setdefault(int(shell[v]), set()).add(v)
+    accepted = np.zeros(len(collapses), bool)
+    k = len(collapses) if limit is None else limit
+    for i, (a, c) in enumerate(np.asarray(collapses)[:k]):
+        if len(tris) <= stop_faces:
+            break
+        a, c = int(a), int(c)
+        if a == c or locked[a] or locked[c] or len(members[int(shell[a])]) <= 4:
+            continue
+        fa = {f for f, t in tris.items() if a in t}
+        fc = {f for f, t in tris.items() if c in t}
+        shared = fa & fc
+        if len(shared) != 2:
+            continue
+        link_a = {v for f in fa for v in tris[f]} - {a, c}
+        link_c = {v for f in fc for v in tris[f]} - {a, c}
+        if len(link_a & link_c) != 2:
+            continue
+        wa, wc = w[a] + w[c], None
+        cen = (w[a] * C[a] + w[c] * C[c]) / wa
+        Aq = A[a] + A[c]
+        lam = reg * np.trace(Aq) / 3.0 + 1e-300
+        rad = max(R[a] + np.linalg.norm(cen - C[a]) if w[a] > 0 else R[a],
+                  R[c] + np.linalg.norm(cen - C[c]) if w[c] > 0 else R[c],
+                  np.linalg.norm(cen - positions[a]), np.linalg.norm(cen - positions[c]))
+        p = cen
+        try:
+            x = np.linalg.solve(Aq + lam * np.eye(3), b[a] + b[c] + lam * cen)
+            if np.linalg.norm(x - cen) <= 2 * rad + 1e-12 * (1 + rad):
+                p = x
+        except np.linalg.LinAlgError:
+            pass
+
+        def normal(t, moved):
+            q = [p if moved and v in (a, c) else P[v] for v in t]
+            return np.cross(q[1] - q[0], q[2] - q[0])
+
+        ok = True
+        for f in (fa | fc) - shared:
+            o, nw = normal(tris[f], False), normal(tris[f], True)
+            if not np.linalg.norm(nw) > 0 or o @ nw < min_cos * np.linalg.norm(o) * np.linalg.norm(nw):
+                ok = False
+                break
+        if not ok:
+            continue
+        for f in shared:
+            del tris[f]
+        for f in fc - shared:
+            tris[f] = [a if v == c else v for v in tris[f]]
+        P[a] = p
+        A[a] += A[c]
+        b[a] += b[c]
+        C[a], w[a], R[a] = cen, wa, rad
+        members[int(shell[a])].discard(c)
+        accepted[i] = True
+    return P, [tuple(tris[f]) for f in sorted(tris)], accepted
+
+
 # -- continuous-time factor bounds -----------------------------------------------------------
 
 def factor_terms(L, t, q, s, anim, rest_local, omega_margin, alpha_margin):

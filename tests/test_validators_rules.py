@@ -288,6 +288,11 @@ def b407(s):
     _edit(s, MESH, "colossus:parts:radii", lambda r: (tight * (1 + 1e-6) + 1e-5).astype(np.float32))
 
 
+def b701(s):
+    # a proxy (its provenance says it was simplified) that lost its deviation
+    s.GetPrimAtPath(MESH).SetCustomDataByKey("colossus:proxy:sourceFaces", 100000)
+
+
 BREAKERS = {int(name[1:]): fn for name, fn in globals().items() if name.startswith("b") and name[1:].isdigit()}
 BREAKERS = {f"COL{k:03d}": v for k, v in BREAKERS.items()}
 #: Codes whose failing fixture is not an edited stage (files on disk, options, a crashing rule).
@@ -435,3 +440,27 @@ def test_broken_prerequisite_skips_dependent_rules_with_reason(good_path):
     assert "COL107" in r.codes()
     assert "COL403" in r.skipped and "radii" in r.skipped["COL403"]
     assert r.stats["frameproof"]["not_checked"]
+
+
+def test_col701_proxy_deviation_within_max_deviation(good_path):
+    from runtime import schema
+
+    stage = open_copy(good_path)
+    mesh = stage.GetPrimAtPath(MESH)
+    faces = len(np.array(UsdGeom.Mesh(mesh).GetFaceVertexCountsAttr().Get()))
+    mesh.SetCustomDataByKey(schema.PROXY_SOURCE_FACES, faces * 5)
+    mesh.SetCustomDataByKey(schema.PROXY_MAX_DEVIATION, 0.02)
+    assert "COL701" not in check_asset(stage).codes()
+    assert "COL701" not in check_asset(stage, max_deviation="0.05").codes()
+    bad = check_asset(stage, max_deviation="0.01").by_code("COL701")
+    assert bad and bad[0].severity == "error" and abs(bad[0].location["excess"] - 0.01) < 1e-9
+    # relative to the model size (the tube is 3 units long: 0.1% is 0.003)
+    assert "COL701" in check_asset(stage, max_deviation="0.1%").codes()
+    assert "COL701" not in check_asset(stage, max_deviation="50%").codes()
+    mesh.SetCustomDataByKey(schema.PROXY_MAX_DEVIATION, float("nan"))
+    assert "COL701" in check_asset(stage).codes()
+    mesh.SetCustomDataByKey(schema.PROXY_MAX_DEVIATION, 0.0)
+    mesh.SetCustomDataByKey(schema.PROXY_SOURCE_FACES, 3)  # fewer faces than the proxy has
+    assert "COL701" in check_asset(stage).codes()
+    with pytest.raises(Exception):
+        check_asset(stage, max_deviation="wide")

@@ -45,6 +45,9 @@ def _list_rules(ctx, param, value):
               help="Also check K evenly spaced in-between times per frame interval.")
 @click.option("--slack-ratio", type=click.FloatRange(min=1.0), default=1.5, show_default=True,
               help="Warn when a sphere is this many times the tightest radius.")
+@click.option("--max-deviation", default=None, metavar="D",
+              help="A simplified proxy must stay within D of the full skinned mesh (stage units, or D% of "
+                   "the model size; COL701).")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Check assets in N parallel processes.")
 @click.option("--scheduler", metavar="ADDRESS",
@@ -62,8 +65,8 @@ def _list_rules(ctx, param, value):
 @click.option("--list-rules", is_flag=True, expose_value=False, is_eager=True, callback=_list_rules,
               help="Print the rule catalog and exit.")
 @maps_errors(input_status=2)
-def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, subframes, slack_ratio, jobs,
-                 scheduler, split_above, source, progress, verbose):
+def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, subframes, slack_ratio, max_deviation,
+                 jobs, scheduler, split_above, source, progress, verbose):
     """Check collider assets: PATHS are files, directories (searched for *.usd, *.usda,
     *.usdc, *.usdz) or globs ('assets/**/*.usda').  Exit 0 all pass, 1 any error finding,
     2 a path unreadable or usage, 130 interrupted (the report so far is still written, marked
@@ -92,6 +95,8 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
     except KeyError as e:
         raise click.UsageError(f"--severity: unknown rule code {e}")
 
+    from pipeline.stages.simplify import parse_max_deviation
+    parse_max_deviation(max_deviation)  # a bad value is a usage error (exit 2) before any asset is read
     if source is not None and not __import__("os").path.isfile(source):
         click.echo(f"error: --source {source}: no such file", err=True)
         click.get_current_context().exit(2)
@@ -99,7 +104,7 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
     show = sys.stderr.isatty() if progress is None else progress
     res = check_many(paths, jobs=jobs, scheduler=scheduler, progress=show, split_bytes=split_bytes,
                      select=sel, ignore=ign, severities=sev, max_influences=max_influences,
-                     subframes=subframes, slack_ratio=slack_ratio,
+                     subframes=subframes, slack_ratio=slack_ratio, max_deviation=max_deviation,
                      **({"source": source} if source is not None else {}))
     reports, missing = res.reports, res.missing
     for m in missing:

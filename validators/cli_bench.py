@@ -9,24 +9,27 @@ import os
 
 import click
 
-from pipeline.bench import bench_import, bench_scaling
+from pipeline.bench import bench_import, bench_scaling, bench_simplify
 
 from .bench import coldstart, format_bench, format_scale_bench, run_bench, run_scale_bench
 
 
 @click.command("bench")
 @click.option("--quick", is_flag=True, help="Smaller sizes (a smoke run).")
-@click.option("--only", type=click.Choice(["import", "scaling", "validate", "runtime", "scale", "coldstart"]), multiple=True,
+@click.option("--only", type=click.Choice(["import", "scaling", "validate", "runtime", "scale", "coldstart", "simplify"]), multiple=True,
               help="Run only these benchmarks (repeatable).")
 def bench_cmd(quick, only):
     """Run the benchmarks; absolute times are this machine's, ratios are against in-process baselines."""
-    want = set(only) or {"import", "scaling", "validate", "runtime", "scale", "coldstart"}
+    want = set(only) or {"import", "scaling", "validate", "runtime", "scale", "coldstart", "simplify"}
     click.echo(f"colossus bench on {os.cpu_count()} cores (absolute times are this machine's)\n")
     if "import" in want:
         bench_import(*((20_000, 20, 2, 30) if quick else ()), echo=click.echo)
         click.echo()
     if "scaling" in want:
         bench_scaling((10_000, 40_000, 160_000) if quick else (50_000, 200_000, 800_000), echo=click.echo)
+        click.echo()
+    if "simplify" in want:
+        bench_simplify(*((20_000, 1_000, 20, 2, 30) if quick else ()), echo=click.echo)
         click.echo()
     if "validate" in want:
         click.echo(format_bench(run_bench()))

@@ -27,12 +27,16 @@ SUFFIXES = (".png", ".gif")
               help="Image size in pixels [800x600 for .png, 480x360 for .gif].")
 @click.option("--max-frames", type=click.IntRange(min=1, max=1000), default=60, show_default=True,
               help=".gif: frames are subsampled evenly to at most this many.")
+@click.option("--source", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="Also draw the full mesh of FILE (the export a proxy was made from) faintly behind the collider.")
 @maps_errors(input_status=2)
-def render_cmd(path, output, clip, time_, size, max_frames):
+def render_cmd(path, output, clip, time_, size, max_frames, source):
     """Render the collision mesh of PATH with every part's sphere drawn translucent in the part's
     colour.  A part whose sphere does not hold its vertices on the pose drawn is red, and its
-    offending vertices are marked in yellow."""
-    from .render import RenderError, parse_size, render_gif, render_png
+    offending vertices are marked in yellow.  With --source, the full skinned mesh of the export
+    (imported with the asset's own settings, posed by the asset's joints) is drawn faint grey
+    behind it, so the fit of a simplified proxy shows."""
+    from .render import RenderError, parse_size, render_gif, render_png, source_mesh
     from .summary import open_asset
 
     suffix = output[output.rfind("."):].lower() if "." in output else ""
@@ -46,16 +50,22 @@ def render_cmd(path, output, clip, time_, size, max_frames):
         raise click.BadParameter(str(e), param_hint="'--size'")
     try:
         asset = open_asset(path)
+        full = None
+        if source is not None:
+            from .render import check_drawable
+
+            check_drawable(asset)
+            full = source_mesh(asset, source)
         if suffix == ".png":
             if clip is None and time_ is not None:
                 if not asset.clips:
                     raise RenderError(f"{path}: has no clips (--time needs one)")
                 clip = asset.clips[0].name
-            pose = render_png(asset, output, clip=clip, time=time_, size=wh)
+            pose = render_png(asset, output, clip=clip, time=time_, size=wh, source=full)
             what = pose.label
             failing = int(pose.failing.sum())
         else:
-            ps = render_gif(asset, output, clip=clip, size=wh, max_frames=max_frames)
+            ps = render_gif(asset, output, clip=clip, size=wh, max_frames=max_frames, source=full)
             what = f"{ps[0].clip}, {len(ps)} frames"
             failing = sum(bool(p.failing.any()) for p in ps)
     except ColossusError:

@@ -34,6 +34,7 @@ FAMILIES = (
     ("COL4", "validators.rules.parts", "Parts: spheres that must hold on every frame"),
     ("COL5", "validators.rules.animation", "Animation: the clips"),
     ("COL6", "validators.rules.source", "Source: the asset against the export it was made from (`--source`)"),
+    ("COL7", "validators.rules.proxy", "Proxy: a simplified collision mesh and its deviation"),
 )
 
 

@@ -11,13 +11,18 @@ software EGL is enough, no GPU or X server needed) when ``libEGL`` is present.
 
 Public functions
 ----------------
-pose_at(asset, clip=None, time=None) -> Pose
-poses(asset, clip, times) -> list of Pose
+source_mesh(asset, path) -> SourceMesh
+pose_at(asset, clip=None, time=None, source=None) -> Pose
+poses(asset, clip, times, source=None) -> list of Pose
 slack_series(asset, clip) -> (times (f,), slack (f, P))
 part_colors(P) -> (P, 3) float in [0, 1]
 render_image(asset, pose, size=(800, 600)) -> (H, W, 3) uint8
-render_png(asset, out, clip=None, time=None, size=(800, 600))
-render_gif(asset, out, clip=None, size=(480, 360), max_frames=60)
+render_png(asset, out, clip=None, time=None, size=(800, 600), source=None)
+render_gif(asset, out, clip=None, size=(480, 360), max_frames=60, source=None)
+
+``source`` (:func:`source_mesh`): the full mesh a collision proxy was made from, imported from its
+export with the asset's own settings up to ``bind`` and posed by the asset's own joints, drawn
+faintly behind the collider so a person sees the fit.
 """
 
 from __future__ import annotations
@@ -40,6 +45,9 @@ FAIL_RGB = (0.95, 0.04, 0.04)
 MARK_RGB = (1.0, 0.85, 0.0)
 BACKGROUND = (0.97, 0.97, 0.96)
 SPHERE_OPACITY = 0.18
+#: The full mesh behind a proxy (``--source``): colour and opacity.
+SOURCE_RGB = (0.35, 0.35, 0.4)
+SOURCE_OPACITY = 0.3
 
 
 class RenderError(ColossusError):
@@ -61,6 +69,7 @@ class Pose:
     excess : (P,) float64       farthest vertex distance minus radius (> tolerance: failing)
     failing : (P,) bool
     outside : (m,) int          vertices outside a sphere of a part they belong to
+    source_points : (n_s, 3) float32 or None   the full mesh (``source``) at the same pose
     """
 
     label: str
@@ -72,6 +81,58 @@ class Pose:
     excess: np.ndarray
     failing: np.ndarray
     outside: np.ndarray
+    source_points: np.ndarray | None = None
+
+
+@dataclass
+class SourceMesh:
+    """The full skinned mesh an asset (a collision proxy) was made from, in the asset's joints.
+
+    path : str; positions : (n, 3) float32 mesh space; triangles : (m, 3) int64;
+    joint_indices : (n, k) int32 into the asset's joints; joint_weights : (n, k) float32;
+    inv_bind : (b, 4, 4) float64 (asset joint order); geom_bind : (4, 4) float64
+    """
+
+    path: str
+    positions: np.ndarray
+    triangles: np.ndarray
+    joint_indices: np.ndarray
+    joint_weights: np.ndarray
+    inv_bind: np.ndarray
+    geom_bind: np.ndarray
+
+    def points(self, asset, skel) -> np.ndarray:
+        """``(f, n, 3)`` float32 stage-space points for ``(f, b, 4, 4)`` skeleton-space joint
+        transforms of the asset."""
+        sk = fp.skinning_transforms(skel, self.inv_bind, self.geom_bind, asset.skel_world)
+        return fp.skin_frames(self.positions, self.joint_indices, self.joint_weights, sk)
+
+
+def source_mesh(asset, path) -> SourceMesh:
+    """Import ``path`` (the export the asset was made from, or a full-mesh asset) with the asset's
+    own import settings (its provenance; no simplification) up to ``bind``, its joints matched
+    to the asset's by name.  Raises :class:`RenderError` when its skeleton lacks an influencing
+    joint of the asset's, and the import's own errors for an unreadable file."""
+    from pxr import UsdSkel
+
+    from pipeline.run import build_collider, settings_from_provenance
+    from runtime import schema
+
+    prov = asset.mesh.GetCustomDataByKey(schema.PROVENANCE_KEY) if asset.mesh is not None else None
+    settings = settings_from_provenance(dict((prov if isinstance(prov, dict) else {}).get("settings") or {}))
+    settings.target_faces = settings.max_deviation = None
+    mesh, _ = build_collider(os.fspath(path), settings, stop_after="bind")
+    names = UsdSkel.Skeleton(asset.skeleton).GetJointNamesAttr().Get()
+    names = [str(n) for n in names] if names else [j.rsplit("/", 1)[-1] for j in asset.joints]
+    index = {n: i for i, n in enumerate(names)}
+    used = np.unique(mesh.joint_indices[mesh.joint_weights > 0])
+    missing = [mesh.joint_names[j] for j in used if mesh.joint_names[j] not in index]
+    if missing:
+        raise RenderError(f"{path}: its skeleton does not match {asset.path}'s (no joint {missing[0]!r} there)")
+    to_asset = np.array([index.get(n, 0) for n in mesh.joint_names], dtype=np.int32)
+    inv_bind = np.linalg.inv(asset.bind)
+    return SourceMesh(os.fspath(path), mesh.positions, mesh.triangles.astype(np.int64),
+                      to_asset[mesh.joint_indices], mesh.joint_weights, inv_bind, mesh.geom_bind)
 
 
 def check_drawable(asset) -> None:
@@ -90,8 +151,8 @@ def _find_clip(asset, clip):
     raise RenderError(f"no clip {clip!r} (clips: {names})")
 
 
-def _poses_from_skel(asset, skel, labels, clip, times) -> list:
-    """Poses for ``(f, b, 4, 4)`` skeleton-space joint transforms."""
+def _poses_from_skel(asset, skel, labels, clip, times, source=None) -> list:
+    """Poses for ``(f, b, 4, 4)`` skeleton-space joint transforms (and ``source`` posed alike)."""
     joint_world = asset.skel_world @ skel
     sk = fp.skinning_transforms(skel, asset.inv_bind, asset.geom_bind, asset.skel_world)
     pts = fp.skin_frames(asset.points, asset.jidx, asset.jw, sk)
@@ -99,6 +160,7 @@ def _poses_from_skel(asset, skel, labels, clip, times) -> list:
     poff, pverts = asset.part_vertices
     P = len(asset.part_joints)
     pid = np.repeat(np.arange(P), np.diff(poff))
+    spts = source.points(asset, skel) if source is not None else None
     out = []
     for i in range(len(skel)):
         d = np.linalg.norm(pts[i, pverts].astype(np.float64) - wc[i, pid], axis=1)
@@ -110,24 +172,24 @@ def _poses_from_skel(asset, skel, labels, clip, times) -> list:
         failing = np.zeros(P, bool)
         failing[pid[bad]] = True
         out.append(Pose(labels[i], clip, None if times is None else float(times[i]), pts[i], wc[i], wr[i],
-                        excess, failing, np.unique(pverts[bad])))
+                        excess, failing, np.unique(pverts[bad]), None if spts is None else spts[i]))
     return out
 
 
-def pose_at(asset, clip: str | None = None, time: float | None = None) -> Pose:
+def pose_at(asset, clip: str | None = None, time: float | None = None, source: SourceMesh | None = None) -> Pose:
     """The bind pose (``clip=None``) or ``clip`` at ``time`` (default its first frame; any time,
     interpolated by ``UsdSkel.AnimQuery`` between samples)."""
     check_drawable(asset)
     if clip is None:
-        return _poses_from_skel(asset, asset.bind[None], ["bind pose"], None, None)[0]
+        return _poses_from_skel(asset, asset.bind[None], ["bind pose"], None, None, source)[0]
     c = _find_clip(asset, clip)
     if len(c.times) == 0:
         raise RenderError(f"clip {clip!r} has no frames")
     t = float(c.times[0]) if time is None else float(time)
-    return poses(asset, clip, [t])[0]
+    return poses(asset, clip, [t], source)[0]
 
 
-def poses(asset, clip: str, times) -> list:
+def poses(asset, clip: str, times, source: SourceMesh | None = None) -> list:
     """Poses of ``clip`` at each of ``times`` (one batch through the skinning kernel)."""
     check_drawable(asset)
     c = _find_clip(asset, clip)
@@ -139,7 +201,7 @@ def poses(asset, clip: str, times) -> list:
         on = k >= 0 and abs(c.times[k] - t) <= tol.TIME_CODE_EPS
         frame = f"frame {k}/{len(c.times)}" if on else f"after frame {max(k, 0)}"
         labels.append(f"{c.name}  t={t:g}  {frame}")
-    return _poses_from_skel(asset, skel, labels, c.name, times)
+    return _poses_from_skel(asset, skel, labels, c.name, times, source)
 
 
 def slack_series(asset, clip: str):
@@ -221,9 +283,10 @@ class Renderer:
     asset : LoadedAsset (``check_drawable``)
     size : (W, H)
     fit : list of Pose      the camera is fitted to all of them (a whole clip: no jumping)
+    source : SourceMesh, optional   the full mesh, drawn faint behind (the poses carry its points)
     """
 
-    def __init__(self, asset, size=(800, 600), fit=()):
+    def __init__(self, asset, size=(800, 600), fit=(), source=None):
         from pxr import UsdGeom
 
         pv = _pyvista()
@@ -249,6 +312,13 @@ class Renderer:
         self.mesh.cell_data["rgb"] = self.base_rgb.copy()
         pl.add_mesh(self.mesh, scalars="rgb", rgb=True, show_scalar_bar=False, ambient=0.2,
                     diffuse=0.85, specular=0.2, render=False)
+        self.source = None
+        if source is not None:
+            sf = np.hstack([np.full((len(source.triangles), 1), 3, dtype=np.int64), source.triangles]).ravel()
+            first = next((p.source_points for p in fit if p is not None and p.source_points is not None), None)
+            self.source = pv.PolyData(first if first is not None else source.positions.astype(np.float32), faces=sf)
+            pl.add_mesh(self.source, color=SOURCE_RGB, opacity=SOURCE_OPACITY, ambient=0.3, diffuse=0.6,
+                        show_scalar_bar=False, render=False)
         unit = pv.Sphere(radius=1.0, theta_resolution=32, phi_resolution=20)
         self.spheres = []
         for p in range(P):
@@ -273,7 +343,8 @@ class Renderer:
         cam_up = np.cross(view, right)
         fit = list(fit) or [None]
         step = max(1, len(fit) // 12)
-        pts = np.concatenate([asset.bind_points if p is None else p.points for p in fit[::step]])
+        pts = np.concatenate([asset.bind_points if p is None else p.points for p in fit[::step]]
+                             + [p.source_points for p in fit[::step] if p is not None and p.source_points is not None])
         spheres = [(p.centers, p.radii) for p in fit if p is not None]
         axes = np.stack([right, cam_up, view])
         lo, hi = (pts @ axes.T).min(0), (pts @ axes.T).max(0)
@@ -296,6 +367,8 @@ class Renderer:
         """Draw ``pose``; returns the image ``(H, W, 3) uint8``."""
         pv, pl = self.pv, self.plotter  # noqa: F841
         self.mesh.points = pose.points
+        if self.source is not None and pose.source_points is not None:
+            self.source.points = pose.source_points
         rgb = self.base_rgb.copy()
         red = (np.array(FAIL_RGB) * 255).astype(np.uint8)
         for p in np.nonzero(pose.failing)[0]:
@@ -311,6 +384,8 @@ class Renderer:
             self.marks_poly.copy_from(pv.PolyData(pose.points[pose.outside].astype(np.float32)))
         self.marks.SetVisibility(bool(len(pose.outside)))
         label = pose.label
+        if self.source is not None:
+            label += f"\nfaint grey: the full mesh ({len(self.source.faces) // 4} faces) where it lies outside"
         if pose.failing.any():
             names = ", ".join(self.asset.part_joints[p].rsplit("/", 1)[-1] for p in np.nonzero(pose.failing)[0])
             label += f"\nFAIL: {names} ({len(pose.outside)} vertices outside)"
@@ -329,9 +404,9 @@ class Renderer:
         self.close()
 
 
-def render_image(asset, pose: Pose, size=(800, 600)) -> np.ndarray:
+def render_image(asset, pose: Pose, size=(800, 600), source: SourceMesh | None = None) -> np.ndarray:
     """One pose as an ``(H, W, 3) uint8`` image, camera fitted to it."""
-    with Renderer(asset, size, fit=[pose]) as r:
+    with Renderer(asset, size, fit=[pose], source=source) as r:
         return r.frame(pose)
 
 
@@ -367,10 +442,11 @@ def _write_atomic_bytes(path, data: bytes):
         raise
 
 
-def render_png(asset, out, clip=None, time=None, size=(800, 600)) -> Pose:
-    """Write a PNG of the bind pose or ``clip`` at ``time``; returns the pose drawn."""
-    pose = pose_at(asset, clip, time)
-    _write_atomic_bytes(out, png_bytes(render_image(asset, pose, size)))
+def render_png(asset, out, clip=None, time=None, size=(800, 600), source: SourceMesh | None = None) -> Pose:
+    """Write a PNG of the bind pose or ``clip`` at ``time`` (with ``source`` drawn faint
+    behind); returns the pose drawn."""
+    pose = pose_at(asset, clip, time, source)
+    _write_atomic_bytes(out, png_bytes(render_image(asset, pose, size, source)))
     return pose
 
 
@@ -381,9 +457,10 @@ def gif_times(times, max_frames: int = 60) -> np.ndarray:
     return times[::step]
 
 
-def render_gif(asset, out, clip=None, size=(480, 360), max_frames=60) -> list:
+def render_gif(asset, out, clip=None, size=(480, 360), max_frames=60, source: SourceMesh | None = None) -> list:
     """Write an animated GIF of ``clip`` (default the first), frames subsampled to at most
-    ``max_frames``, played at the clip's speed; returns the poses drawn."""
+    ``max_frames``, played at the clip's speed (with ``source`` drawn faint behind); returns the
+    poses drawn."""
     import io
 
     from PIL import Image
@@ -395,12 +472,12 @@ def render_gif(asset, out, clip=None, size=(480, 360), max_frames=60) -> list:
     if len(c.times) == 0:
         raise RenderError(f"clip {c.name!r} has no frames")
     times = gif_times(c.times, max_frames)
-    ps = poses(asset, c.name, times)
+    ps = poses(asset, c.name, times, source)
     tcps = float(asset.stage.GetTimeCodesPerSecond()) or 24.0
     dt = float(np.median(np.diff(times))) if len(times) > 1 else 1.0
     ms = max(20, int(round(1000.0 * dt / tcps)))
     frames = []
-    with Renderer(asset, size, fit=ps) as r:
+    with Renderer(asset, size, fit=ps, source=source) as r:
         for p in ps:
             im = Image.fromarray(r.frame(p))
             frames.append(im.quantize(colors=128, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE))

@@ -27,6 +27,7 @@ DEFAULT_OPTIONS = {
     "slack_ratio": tol.SLACK_RATIO,
     "chunk_frames": None,
     "clip_proofs": None,
+    "max_deviation": None,
     "source": None,
 }
 
@@ -35,6 +36,7 @@ class Context:
     """Options shared by the rules of one asset, and the cached frame proof.
 
     Attributes: ``max_influences`` (int), ``subframes`` (int), ``slack_ratio`` (float),
+    ``max_deviation`` (``(length, relative)`` or None: COL701's limit),
     ``chunk_frames`` (int or None: automatic), ``source`` (the export the asset was made from, for
     the COL6xx rules; None: they do not run), ``clip_proofs`` (proofs of the asset's clips
     already run elsewhere, e.g. one per clip on other workers, merged instead of proving again;
@@ -57,6 +59,9 @@ class Context:
         self.slack_ratio = float(opts["slack_ratio"])
         self.chunk_frames = opts["chunk_frames"]
         self.clip_proofs = opts["clip_proofs"]
+        from pipeline.stages.simplify import parse_max_deviation
+        #: ``(length, relative)`` or None: the COL701 limit (``--max-deviation``)
+        self.max_deviation = parse_max_deviation(opts["max_deviation"])
         self.source = opts["source"]
         self._proof = None
         self._source_check = None
@@ -105,7 +110,8 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
         ``code -> "error" | "warning" | "info"`` overrides.
     **options
         ``max_influences`` (4), ``subframes`` (0), ``continuous`` (True: certify every time between
-        frames), ``slack_ratio`` (1.5), ``chunk_frames`` (auto).
+        frames), ``slack_ratio`` (1.5), ``chunk_frames`` (auto), ``max_deviation`` (None; ``"0.02"``
+        stage units or ``"1%"`` of the model size: COL701).
 
     Returns
     -------

@@ -7,6 +7,10 @@ is used), and both are skinned on every frame of every clip the asset holds, the
 own UsdSkel data (``UsdSkel.AnimQuery``, as any consumer plays it), the source by linear-blend
 skinning of what the reader found.  A CI gate for stale colliders: a source whose motion, clips
 or geometry changed since the import no longer matches.
+
+A simplified proxy (``--target-faces`` / ``--max-deviation`` in its provenance) is compared with
+the source imported again with those settings up to the ``simplify`` stage: the same proxy when
+the source is unchanged (the decimation is deterministic), other vertices when it changed.
 """
 
 from __future__ import annotations
@@ -67,7 +71,7 @@ def compare_source(asset, source_path, chunk_frames: int = 64) -> SourceCheck:
     with the export ``source_path``.  Never raises for a bad source: ``error`` says why."""
     from pipeline.errors import ColossusError
     from pipeline.model import skel_transforms, skin_points
-    from pipeline.run import read_baked, settings_from_provenance, sha256_of
+    from pipeline.run import build_collider, read_baked, settings_from_provenance, sha256_of
     from scipy.spatial import cKDTree
 
     from .frameproof import skin_frames, skinning_transforms
@@ -78,7 +82,12 @@ def compare_source(asset, source_path, chunk_frames: int = 64) -> SourceCheck:
     try:
         out.sha256 = sha256_of(src)
         settings = settings_from_provenance(dict(prov.get("settings") or {}))
-        m = read_baked(src, settings)
+        if settings.proxy:
+            # a simplified proxy's vertices are not the source's: simplify the source again with
+            # the asset's settings (deterministic) and compare with that proxy
+            m = build_collider(src, settings, stop_after="simplify")[0]
+        else:
+            m = read_baked(src, settings)
     except (ColossusError, OSError, ValueError) as exc:
         out.error = str(exc)
         return out

@@ -71,7 +71,9 @@ def summarize(asset: LoadedAsset) -> dict:
     ``keysOnGrid``, ``errorBound``), ``meshes`` (``[{"name", "kind", "vertices", "joint"}]``: the
     source meshes in the collider, skinned or rigid), ``parts``
     (``[{"index", "joint", "faces", "radius"}]``) and ``provenance`` (the mesh's
-    ``customData["colossus"]``, or ``{}``).
+    ``customData["colossus"]``, or ``{}``) and ``proxy`` (a simplified proxy's ``sourceFaces``,
+    ``maxDeviation``, ``measuredDeviation``, ``worstClip``, ``worstFrame``, ``worstBone``,
+    ``worstDirection``; None for a full mesh).
     """
     stage = asset.stage
     tcps = float(stage.GetTimeCodesPerSecond())
@@ -136,6 +138,16 @@ def summarize(asset: LoadedAsset) -> dict:
     if asset.mesh is not None:
         prov = _plain(dict(asset.mesh.GetCustomData().get(schema.PROVENANCE_KEY, {}) or {}))
     out["provenance"] = prov
+    out["model_size"] = float(asset.model_size) if asset.points is not None else None
+    out["proxy"] = None
+    if asset.mesh is not None and isinstance(asset.mesh.GetCustomDataByKey(schema.PROXY_KEY), dict):
+        g = asset.mesh.GetCustomDataByKey
+        out["proxy"] = {"sourceFaces": _plain(g(schema.PROXY_SOURCE_FACES)),
+                        "maxDeviation": _plain(g(schema.PROXY_MAX_DEVIATION)),
+                        "measuredDeviation": _plain(g(schema.PROXY_MEASURED_DEVIATION)),
+                        "worstClip": _plain(g(schema.PROXY_WORST_CLIP)), "worstFrame": _plain(g(schema.PROXY_WORST_FRAME)),
+                        "worstBone": _plain(g(schema.PROXY_WORST_BONE)),
+                        "worstDirection": _plain(g(schema.PROXY_WORST_DIRECTION))}
     out["meshes"] = [{"name": k, **(v if isinstance(v, dict) else {})} for k, v in (prov.get("meshes") or {}).items()]
     return out
 
@@ -170,6 +182,18 @@ def format_summary(s: dict) -> str:
         if settings:
             lines.append("  settings      " + ", ".join(f"{k}={v!s}" for k, v in sorted(settings.items())
                                                       if v not in ("", None)))
+    px = s.get("proxy")
+    if px:
+        lines.append("")
+        lines.append("proxy (simplified collision mesh)")
+        lines.append(f"  faces         {_fmt(c['triangles'])} (source {px['sourceFaces']})")
+        dev = px["maxDeviation"]
+        rel = f" ({100 * dev / s['model_size']:.3g}% of size)" if isinstance(dev, float) and s.get("model_size") else ""
+        where = ("the bind pose" if px["worstFrame"] in (-1, None) else f"clip {px['worstClip']} frame {px['worstFrame']}")
+        meas = px.get("measuredDeviation")
+        meas = f"{_fmt(meas, '.4g')} measured" if isinstance(meas, (int, float)) else "largest measured"
+        lines.append(f"  deviation     <= {_fmt(dev, '.4g') if isinstance(dev, (int, float)) else '-'}{rel}; {meas} at "
+                     f"{where}, bone {px['worstBone'] or '-'} ({px['worstDirection'] or '-'})")
     if s.get("meshes"):
         lines.append("")
         lines.append(f"source meshes ({len(s['meshes'])})")

@@ -58,6 +58,57 @@ def nearest_bone(points: np.ndarray, bind: np.ndarray, parents: np.ndarray) -> n
     return out
 
 
+def limit_influences(joint_indices: np.ndarray, weights: np.ndarray, max_influences: int):
+    """The strongest ``max_influences`` influences of each vertex, negligible ones dropped,
+    renormalised (the one place this is done: ``bind`` and ``simplify`` use it).
+
+    Parameters
+    ----------
+    joint_indices : (n, s) int
+    weights : (n, s) float, >= 0, each row summing to 1 (any column order)
+    max_influences : int, >= 1
+
+    Returns
+    -------
+    out_j : (n, max_influences) int32
+        Strongest first; padding entries joint 0.
+    out_w : (n, max_influences) float64
+        Matching weights, summing to 1; padding 0.
+    over : (n, s) bool
+        Influences dropped for being beyond the strongest ``max_influences`` (input column order
+        after sorting strongest first).
+    negligible : (n, s) bool
+        Influences dropped for being below :data:`~pipeline.tolerances.NEGLIGIBLE_WEIGHT`.
+    dropped_weight : (n,) float64
+        Total weight dropped from each vertex.
+    """
+    norm = np.asarray(weights, dtype=np.float64)
+    ji = np.asarray(joint_indices, dtype=np.int64)
+    n = len(norm)
+    srt = np.argsort(-norm, axis=1, kind="stable")
+    norm = np.take_along_axis(norm, srt, axis=1)
+    ji = np.take_along_axis(ji, srt, axis=1)
+    present = norm > 0
+    negligible = present & (norm < NEGLIGIBLE_WEIGHT)
+    negligible[:, 0] = False  # never drop a vertex's strongest influence
+    keep = present & ~negligible
+    rank = np.cumsum(keep, axis=1)
+    over = keep & (rank > max_influences)
+    keep &= ~over
+    dropped_weight = np.where(over | negligible, norm, 0.0).sum(axis=1)
+    kk = max(max_influences, 1)
+    out_j = np.zeros((n, kk), dtype=np.int32)
+    out_w = np.zeros((n, kk), dtype=np.float64)
+    src_k = ji.shape[1]
+    # kept entries are already sorted strongest first; compact them to the left
+    pos = np.cumsum(keep, axis=1) - 1
+    rows = np.broadcast_to(np.arange(n)[:, None], (n, src_k))
+    out_j[rows[keep], pos[keep]] = ji[keep]
+    out_w[rows[keep], pos[keep]] = norm[keep]
+    out_w /= out_w.sum(axis=1, keepdims=True)
+    return out_j, out_w, over, negligible, dropped_weight
+
+
 def bind(mesh: SkinnedMesh, max_influences: int = 4, unweighted: str = "error"):
     """Limit, clean and normalise skin weights; order joints parents-first.
 
@@ -108,29 +159,7 @@ def bind(mesh: SkinnedMesh, max_influences: int = 4, unweighted: str = "error"):
         total = jw.sum(axis=1)
 
     # -- strongest first, drop negligible and excess, renormalise -------------------------
-    norm = jw / total[:, None]
-    srt = np.argsort(-norm, axis=1, kind="stable")
-    norm = np.take_along_axis(norm, srt, axis=1)
-    ji = np.take_along_axis(ji, srt, axis=1)
-    present = norm > 0
-    negligible = present & (norm < NEGLIGIBLE_WEIGHT)
-    negligible[:, 0] = False  # never drop a vertex's strongest influence
-    keep = present & ~negligible
-    rank = np.cumsum(keep, axis=1)
-    over = keep & (rank > max_influences)
-    keep &= ~over
-    dropped_weight = np.where(over | negligible, norm, 0.0).sum(axis=1)
-    kk = max(max_influences, 1)
-    out_j = np.zeros((n, kk), dtype=np.int32)
-    out_w = np.zeros((n, kk), dtype=np.float64)
-    src_k = ji.shape[1]
-    # kept entries are already sorted strongest first; compact them to the left
-    pos = np.cumsum(keep, axis=1) - 1
-    rows = np.broadcast_to(np.arange(n)[:, None], (n, src_k))
-    sel = keep
-    out_j[rows[sel], pos[sel]] = ji[sel]
-    out_w[rows[sel], pos[sel]] = norm[sel]
-    out_w /= out_w.sum(axis=1, keepdims=True)
+    out_j, out_w, over, negligible, dropped_weight = limit_influences(ji, jw / total[:, None], max_influences)
 
     clips = tuple(Clip(c.name, c.times, c.local[:, order]) for c in mesh.clips)
     out = mesh.replace(
