@@ -90,8 +90,10 @@ def _usd_clip(q0, q1, t0=(0, 0, 0), t1=(1, 2, 3), s0=(1, 1, 1), s1=(2, 1, 0.5)):
     return stage, cache, cache.GetAnimQuery(anim)
 
 
-def test_interpolation_matches_usdskel_shortest_arc():
-    """GfSlerp takes the shortest arc: with q0 . q1 < 0 it negates q1; the runtime's port does too."""
+@pytest.mark.parametrize("compiled", [True, False])
+def test_interpolation_matches_usdskel_shortest_arc(compiled):
+    """GfSlerp takes the shortest arc: with q0 . q1 < 0 it negates q1; the runtime's port does too
+    (the compiled kernel and the numpy path the proof takes on small clips)."""
     rng = np.random.default_rng(4)
     for trial in range(6):
         q0 = Rotation.random(random_state=trial).as_quat()
@@ -107,7 +109,7 @@ def test_interpolation_matches_usdskel_shortest_arc():
                         np.array([0.0, 1.0]), np.array([[[1, 1, 1]], [[2, 1, 0.5]]], float),
                         np.array([0]), np.array([0.0, 1.0]))
         for a in (0.0, 0.25, 0.5, 0.9):
-            ours = PK.locals_at(clip, [a], np.eye(4)[None])[0, 0]
+            ours = PK.locals_at(clip, [a], np.eye(4)[None], compiled=compiled)[0, 0]
             ref = np.array(query.ComputeJointLocalTransforms(Usd.TimeCode(a))[0]).T  # row -> column vector
             np.testing.assert_allclose(ours, ref, atol=2e-6)
             qa = naive.slerp(clip.vr[0, 0], clip.vr[1, 0], a)
@@ -115,6 +117,46 @@ def test_interpolation_matches_usdskel_shortest_arc():
             sa = [float(h(h((1 - a) * s0) + h(a * s1))) for s0, s1 in zip((1, 1, 1), (2, 1, 0.5))]
             want = naive.trs([[a, 2 * a, 3 * a]], qa[None], [sa])[0]
             np.testing.assert_allclose(ours, want, atol=1e-5)
+
+
+def test_locals_at_numpy_path_equals_the_kernel():
+    """The numpy path of ``locals_at`` against the compiled kernel on a clip whose channels have
+    their own sample times: times before, after and exactly on samples, a nearly parallel
+    rotation pair (GfSlerp's linear branch), opposite hemispheres, half-precision scales."""
+    rng = np.random.default_rng(21)
+    A, J = 5, 7
+    tt, tr, ts = np.array([0.0, 2, 3, 7]), np.array([1.0, 4, 5]), np.array([0.0, 6])
+    vt = rng.normal(size=(4, A, 3))
+    vr = Rotation.random(3 * A, random_state=2).as_quat().reshape(3, A, 4)
+    vr[1, 0] = -(vr[0, 0] + 1e-4)  # nearly parallel, opposite sign
+    vr = vr.astype(np.float32).astype(float)
+    vs = rng.uniform(0.7, 1.3, (2, A, 3)).astype(np.float16).astype(float)
+    clip = ClipData("c", "/c", tt, vt, tr, vr, ts, vs, np.array([0, 2, 3, 5, 6]), tt)
+    rest = naive.trs(rng.normal(size=(J, 3)), Rotation.random(J, random_state=3).as_quat(), np.ones((J, 3)))
+    times = np.array([-1.0, 0, 0.5, 1, 1.7, 2, 3.3, 4, 4.5, 6, 6.9, 7, 9])
+    a = PK.locals_at(clip, times, rest, trs=True, compiled=True)
+    b = PK.locals_at(clip, times, rest, trs=True, compiled=False)
+    for x, y in zip(a, b):
+        np.testing.assert_allclose(y, x, rtol=0, atol=1e-13)
+
+
+def test_chain_bounds_numpy_path_equals_the_kernel():
+    """The continuous certificate's chain recursion, vectorised (small clips) against the kernel."""
+    rng = np.random.default_rng(8)
+    rig, clip, _ = random_rig(rng, J=7, n=300, F=6, scale=True)
+    fac = C.factor_bounds(clip, clip.times, rig.rest_local)
+    off, pj, pd, pair_part = rig.paths()
+    bd = rig.bounds
+    I, M = len(clip.times) - 1, len(bd.pj_joint)
+    outs = []
+    for compiled in (True, False):
+        e = [np.zeros((I, M)) for _ in range(5)]
+        B.chain_bounds(fac["L0"], fac["L1"], fac["Li0"], fac["Li1"], fac["fw"], fac["iv"], fac["dt"], fac["eps"],
+                       off, pj, pd, bd.pj_center, bd.pj_radius, pair_part, bd.part_centers, *e, compiled=compiled)
+        outs.append(e)
+    assert M > 10 and np.diff(off).max() >= 3
+    for x, y in zip(*outs):
+        np.testing.assert_allclose(y, x, rtol=1e-12, atol=1e-12)
 
 
 def test_trs_matrices_match_naive():

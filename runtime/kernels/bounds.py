@@ -445,12 +445,80 @@ def _chain_bounds_parallel(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, 
         _chain_task(task // M, task % M, L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert)
 
 
-def chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert):
+#: Below this many path factors in all (intervals x factors) :func:`chain_bounds` runs the
+#: vectorised numpy recursion (:func:`_chain_bounds_numpy`): a demo-sized clip takes a few
+#: milliseconds so, and not compiling saves ~1.2 s of a cold start.
+CHAIN_KERNEL_MIN = 100_000
+
+
+def chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert, compiled=None):
     """Run :func:`_chain_bounds_serial` (or its threaded twin on large inputs: more than
-    :data:`PARALLEL_WORK` path factors in all)."""
+    :data:`PARALLEL_WORK` path factors in all; or, below :data:`CHAIN_KERNEL_MIN`, the same
+    recursion vectorised in numpy; ``compiled`` forces the choice)."""
     work = L0.shape[0] * int(path_off[-1]) if len(path_off) else 0
+    if compiled is None:
+        compiled = work >= CHAIN_KERNEL_MIN
+    if not compiled:
+        _chain_bounds_numpy(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius,
+                            pair_part, part_centers, e0, e1, delta, lam, pert)
+        return
     kern = _chain_bounds_parallel if work > PARALLEL_WORK else _chain_bounds_serial
     kern(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert)
+
+
+def _chain_bounds_numpy(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius,
+                        pair_part, part_centers, e0, e1, delta, lam, pert):
+    """:func:`_chain_task` for every (interval, pair) at once, one path step at a time (the
+    pairs whose path is that long); the same operations, so the same bounds."""
+    I, M = L0.shape[0], pj_center.shape[0]
+    if I == 0 or M == 0:
+        return
+    lens = np.diff(path_off)
+    c = np.broadcast_to(pj_center, (I, M, 3))
+    a0, a1 = c.copy(), c.copy()
+    r = np.asarray(pj_radius, dtype=np.float64)[None]
+    m = np.sqrt(np.einsum("imk,imk->im", a0, a0)) + r
+    v, a, lm, pe = np.zeros((I, M)), np.zeros((I, M)), np.ones((I, M)), np.zeros((I, M))
+
+    def xf(T, p):  # (I, K, 4, 4) @ (I, K, 3) points
+        return np.einsum("ikab,ikb->ika", T[..., :3, :3], p) + T[..., :3, 3]
+
+    def norm(p):
+        return np.sqrt(np.einsum("ikc,ikc->ik", p, p))
+
+    with np.errstate(invalid="ignore", over="ignore"):
+        for step in range(int(lens.max(initial=0))):
+            k = np.flatnonzero(lens > step)
+            sidx = path_off[k] + step
+            j, fwd = path_j[sidx], path_dir[sidx] > 0
+            kf, jf, kb, jb = k[fwd], j[fwd], k[~fwd], j[~fwd]
+            n = np.empty((I, len(k), 3))
+            mz, vz = np.empty((I, len(k))), np.empty((I, len(k)))
+            dtj = dt[:, j]
+            if len(kf):
+                n[:, fwd] = fw[:, jf]
+                mz[:, fwd], vz[:, fwd] = m[:, kf], v[:, kf]
+                pe[:, kf] = n[:, fwd, 0] * pe[:, kf] + eps[:, jf, 0] * m[:, kf]
+                a0[:, kf], a1[:, kf] = xf(L0[:, jf], a0[:, kf]), xf(L1[:, jf], a1[:, kf])
+            if len(kb):
+                n[:, ~fwd] = iv[:, jb]
+                z = a0[:, kb] - L0[:, jb][..., :3, 3]
+                w = a1[:, kb] - L1[:, jb][..., :3, 3]
+                mzb = np.maximum(norm(z), norm(w)) + a[:, kb] / 8.0 + r[:, kb] * lm[:, kb]
+                mz[:, ~fwd], vz[:, ~fwd] = mzb, v[:, kb] + dt[:, jb]
+                pe[:, kb] = n[:, ~fwd, 0] * pe[:, kb] + eps[:, jb, 1] * mzb
+                a0[:, kb], a1[:, kb] = xf(Li0[:, jb], a0[:, kb]), xf(Li1[:, jb], a1[:, kb])
+            n0, n1, n2 = n[..., 0], n[..., 1], n[..., 2]
+            v[:, k] = n1 * mz + n0 * vz + np.where(fwd[None], dtj, 0.0)
+            a[:, k] = n2 * mz + 2.0 * n1 * vz + n0 * a[:, k]
+            lm[:, k] = lm[:, k] * n0
+            m[:, k] = np.maximum(norm(a0[:, k]), norm(a1[:, k])) + a[:, k] / 8.0 + r[:, k] * lm[:, k]
+        cp = part_centers[pair_part][None]
+        e0[:] = norm(a0 - cp)
+        e1[:] = norm(a1 - cp)
+        delta[:] = a / 8.0 * (1.0 + 1e-9)
+        lam[:] = lm
+        pert[:] = pe * (1.0 + 1e-9)
 
 
 def chord_tasks(points, ji, jw, mats, poff, pverts, centers, task_part, task_a, task_b, task_delta, task_scale,
