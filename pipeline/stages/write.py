@@ -162,7 +162,7 @@ def _store_clip(local: np.ndarray, parents: np.ndarray, centers: np.ndarray):
     from ..xforms import quat_to_matrix
 
     f, b = local.shape[:2]
-    _, q, s = decompose_trs(local)
+    t_own, q, s = decompose_trs(local)
     q = q.astype(np.float32).astype(np.float64)
     s = s.astype(np.float16).astype(np.float64)
     lin = quat_to_matrix(q) * s[..., None, :]                      # stored local linear parts
@@ -181,7 +181,14 @@ def _store_clip(local: np.ndarray, parents: np.ndarray, centers: np.ndarray):
         stored_lin = m @ lin[:, j]
         d = stored_lin - world[:, j, :3, :3]
         rhs = world[:, j, :3, 3] - o - d @ centers[j]
-        tj = np.linalg.solve(m, rhs[..., None])[..., 0].astype(np.float32).astype(np.float64)
+        # a parent whose stored linear part is singular (a zero scale) cannot be corrected for:
+        # those frames keep the joint's own rounded translation
+        with np.errstate(invalid="ignore", over="ignore"):
+            regular = np.abs(np.linalg.det(m)) > 1e-300
+            tj = t_own[:, j].copy()
+            if regular.any():
+                tj[regular] = np.linalg.solve(m[regular], rhs[regular][..., None])[..., 0]
+        tj = tj.astype(np.float32).astype(np.float64)
         t[:, j] = tj
         sw_lin[:, j] = stored_lin
         sw_off[:, j] = (m @ tj[..., None])[..., 0] + o
