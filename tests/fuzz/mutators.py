@@ -828,6 +828,19 @@ _USDA_TYPES = (b"float3[]", b"point3f[]", b"int[]", b"token[]", b"matrix4d[]", b
                b"uniform token[]", b"double", b"string", b"rel", b"bool", b"int64[]")
 
 
+#: USDA token edits (``how`` 1..5 of the USDA mutator): the regex whose group 1 is replaced, the
+#: replacements (or a function of the old text giving them), and the label of the recipe.
+_USDA_EDITS = (
+    (rb"elementSize = (\d+)", (b"0", b"-1", b"3", b"1", b"100000", b"2147483647", b"99999999999"), "elementSize"),
+    (rb'interpolation = "(\w+)"', (b"constant", b"uniform", b"faceVarying", b"bogus", b""), "interpolation"),
+    (rb'"([\w/]+)"', lambda old: (b"", b"nope", old + b"/" + old, b"/" + old, old.split(b"/")[0], b"a" * 300,
+                                  old + b" "), "string"),
+    (rb"<([^<>\s]+)>", lambda old: (b"/nowhere", b"/", b".", old + b"/x", b"../.."), "target"),
+    (rb"\bdef (\w+)", (b"Xform", b"Mesh", b"Skeleton", b"SkelRoot", b"SkelAnimation", b"Scope", b"Bogus"),
+     "prim type"),
+)
+
+
 def usda_tokens(data, rng):
     """Change one meaningful token: a type name, elementSize, interpolation, a quoted joint
     path or name, a relationship target, a prim type, the header."""
@@ -839,42 +852,15 @@ def usda_tokens(data, rng):
         m = _pick(rng, found)
         new = _pick(rng, _USDA_TYPES)
         return data[:m.start()] + new + data[m.end():], f"USDA type {m.group(0).decode()} -> {new.decode()}"
-    if how == 1:
-        found = list(re.finditer(rb"elementSize = (\d+)", data))
-        if not found:
-            raise NotApplicable
-        m = _pick(rng, found)
-        new = _pick(rng, (b"0", b"-1", b"3", b"1", b"100000", b"2147483647", b"99999999999"))
-        return data[:m.start(1)] + new + data[m.end(1):], f"USDA elementSize -> {new.decode()}"
-    if how == 2:
-        found = list(re.finditer(rb'interpolation = "(\w+)"', data))
-        if not found:
-            raise NotApplicable
-        m = _pick(rng, found)
-        new = _pick(rng, (b"constant", b"uniform", b"faceVarying", b"bogus", b""))
-        return data[:m.start(1)] + new + data[m.end(1):], f"USDA interpolation -> {new.decode()}"
-    if how == 3:
-        found = list(re.finditer(rb'"([\w/]+)"', data))
+    if 1 <= how <= 5:
+        pattern, choices, label = _USDA_EDITS[how - 1]
+        found = list(re.finditer(pattern, data))
         if not found:
             raise NotApplicable
         m = _pick(rng, found)
         old = m.group(1)
-        new = _pick(rng, (b"", b"nope", old + b"/" + old, b"/" + old, old.split(b"/")[0], b"a" * 300, old + b" "))
-        return data[:m.start(1)] + new + data[m.end(1):], f"USDA string {old[:30].decode()} -> {new[:30].decode()}"
-    if how == 4:
-        found = list(re.finditer(rb"<([^<>\s]+)>", data))
-        if not found:
-            raise NotApplicable
-        m = _pick(rng, found)
-        new = _pick(rng, (b"/nowhere", b"/", b".", m.group(1) + b"/x", b"../.."))
-        return data[:m.start(1)] + new + data[m.end(1):], f"USDA target {m.group(1).decode()} -> {new.decode()}"
-    if how == 5:
-        found = list(re.finditer(rb"\bdef (\w+)", data))
-        if not found:
-            raise NotApplicable
-        m = _pick(rng, found)
-        new = _pick(rng, (b"Xform", b"Mesh", b"Skeleton", b"SkelRoot", b"SkelAnimation", b"Scope", b"Bogus"))
-        return data[:m.start(1)] + new + data[m.end(1):], f"USDA prim type {m.group(1).decode()} -> {new.decode()}"
+        new = _pick(rng, choices(old) if callable(choices) else choices)
+        return data[:m.start(1)] + new + data[m.end(1):], f"USDA {label} {old[:30].decode()} -> {new[:30].decode()}"
     new = _pick(rng, (b"#usda 9.0", b"#usda", b"#usdb 1.0", b"", b"#usda 1.0\x00"))
     nl = data.find(b"\n")
     return new + data[nl if nl >= 0 else len(data):], f"USDA header -> {new!r}"
