@@ -685,15 +685,21 @@ def _array_raw(t, values, compress):
     return t.encode() + struct.pack("<III", len(values), enc, len(body)) + body
 
 
-def fbx_array(data, rng):
-    """Change one array property's values (NaN, huge, negative or out-of-range indices) or its
-    length (elements dropped or added), re-encoded so the file stays well formed."""
+def _pick_fbx_array(data, rng):
+    """Parse an FBX and pick one array property: ``(version, top, footer, node, k, type, raw)``."""
     version, top, footer = fbx_parse(data)
     arrays = [(n, k) for n, _, _ in _fbx_all(top) for k, (t, _) in enumerate(n.props) if t in _ARRAY]
     if not arrays:
         raise NotApplicable
     node, k = _pick(rng, arrays)
     t, raw = node.props[k]
+    return version, top, footer, node, k, t, raw
+
+
+def fbx_array(data, rng):
+    """Change one array property's values (NaN, huge, negative or out-of-range indices) or its
+    length (elements dropped or added), re-encoded so the file stays well formed."""
+    version, top, footer, node, k, t, raw = _pick_fbx_array(data, rng)
     try:
         vals = _array_values(t, raw)
     except (zlib.error, ValueError):
@@ -728,12 +734,7 @@ def fbx_array(data, rng):
 
 def fbx_array_header(data, rng):
     """Lie in one array property's header: length, encoding or compressed size."""
-    version, top, footer = fbx_parse(data)
-    arrays = [(n, k) for n, _, _ in _fbx_all(top) for k, (t, _) in enumerate(n.props) if t in _ARRAY]
-    if not arrays:
-        raise NotApplicable
-    node, k = _pick(rng, arrays)
-    t, raw = node.props[k]
+    version, top, footer, node, k, t, raw = _pick_fbx_array(data, rng)
     raw = bytearray(raw)
     length, enc, clen = struct.unpack_from("<III", raw, 1)
     field = int(rng.integers(3))
