@@ -4,7 +4,8 @@
   robin over the seeds, so every format gets its share; every ``VALIDATE_EVERY``-th case mutates
   a collider asset for ``validate`` instead), its mutations (:func:`tests.fuzz.mutators.mutate`
   with ``numpy.random.default_rng([seed, i])``), and whether it runs as a real subprocess.
-* Workers are spawned processes (a clean interpreter each, ``NUMBA_NUM_THREADS=1``) that run cases
+* Workers are spawned processes (a clean interpreter each, ``NUMBA_NUM_THREADS=1``, usd-core's
+  ``Work`` concurrency 1) that run cases
   in-process (:func:`tests.fuzz.oracle.run_case`).  Each caps its address space
   (``RLIMIT_AS``: what it maps after start-up plus ``memory`` bytes), so a runaway allocation
   fails in the case instead of taking the machine; the campaign kills a worker whose case
@@ -50,6 +51,14 @@ def plan(n: int, seed: int, sources, assets, subprocess_every: int = 0, start: i
 
 def _worker(conn, timeout, keep, memory):
     os.environ["NUMBA_NUM_THREADS"] = "1"
+    # usd-core single-threaded too: a worker runs hundreds of cases, and the contained reads fork
+    # it; a usd-core worker thread holding a lock at that moment (a previous case's stage torn
+    # down in the background) can leave the child waiting out its timeout.  Seen once in four
+    # CI campaigns (case 35 of seed 12, a validate that replays clean in 1.1 s).
+    # (set through the API: the PXR_WORK_THREAD_LIMIT variable would print a banner on stderr)
+    from pxr import Work
+
+    Work.SetConcurrencyLimit(1)
     import resource
 
     from . import oracle
