@@ -50,12 +50,10 @@ def read_morph_geometry(path) -> dict:
 KTIME_PER_SECOND = 46186158000
 
 
-def read_anim_stacks(path) -> dict:
-    """``{stack name: (start, stop)}`` in seconds of global scene time, from each
-    ``AnimationStack``'s ``LocalStart``/``LocalStop`` (binary FBX only; ``{}`` when unreadable).
-
-    assimp shifts every stack's keys so that the stack starts at time 0; this gives the shift
-    back (stacks placed one after another on the global timeline keep their own times)."""
+def _object_properties(path, kind: str, wanted) -> dict:
+    """``{object name: {property: value}}`` for every ``Objects/<kind>`` node of a binary FBX,
+    with the ``Properties70`` entries named in ``wanted`` (their value, the fifth field); ``{}``
+    for a file that is not binary FBX or cannot be walked."""
     try:
         with open(path, "rb") as fh:
             data = fh.read()
@@ -67,26 +65,41 @@ def read_anim_stacks(path) -> dict:
             if top != "Objects":
                 continue
             for cname, p_at, p_n, c_children, c_end in nodes(children_at, end - sentinel + 1):
-                if cname != "AnimationStack" or p_n < 2:
+                if cname != kind or p_n < 2:
                     continue
-                vals = props(p_at, 2)
-                name = str(vals[1]).split("\x00")[0].split("::")[-1]
-                span = {}
+                name = str(props(p_at, 2)[1]).split("\x00")[0].split("::")[-1]
+                found = out.setdefault(name, {})
                 for pname, _, _, pc, pe in nodes(c_children, c_end - sentinel + 1):
                     if pname != "Properties70":
                         continue
                     for q, q_at, q_n, _, _ in nodes(pc, pe - sentinel + 1):
                         if q == "P" and q_n >= 5:
                             v = props(q_at, q_n)
-                            if v[0] in ("LocalStart", "LocalStop", "ReferenceStart", "ReferenceStop"):
-                                span[v[0]] = float(v[4]) / KTIME_PER_SECOND
-                start = span.get("LocalStart", span.get("ReferenceStart"))
-                stop = span.get("LocalStop", span.get("ReferenceStop"))
-                if start is not None and stop is not None and stop >= start:
-                    out[name] = (start, stop)
+                            if v[0] in wanted:
+                                found[v[0]] = v[4]
         return out
     except (OSError, struct.error, IndexError, ValueError, UnicodeError, zlib_error):
         return {}
+
+
+def read_anim_stacks(path) -> dict:
+    """``{stack name: (start, stop)}`` in seconds of global scene time, from each
+    ``AnimationStack``'s ``LocalStart``/``LocalStop`` (binary FBX only; ``{}`` when unreadable).
+
+    assimp shifts every stack's keys so that the stack starts at time 0; this gives the shift
+    back (stacks placed one after another on the global timeline keep their own times)."""
+    out = {}
+    try:
+        for name, p in _object_properties(path, "AnimationStack",
+                                          ("LocalStart", "LocalStop", "ReferenceStart", "ReferenceStop")).items():
+            span = {k: float(v) / KTIME_PER_SECOND for k, v in p.items()}
+            start = span.get("LocalStart", span.get("ReferenceStart"))
+            stop = span.get("LocalStop", span.get("ReferenceStop"))
+            if start is not None and stop is not None and stop >= start:
+                out[name] = (start, stop)
+    except (TypeError, ValueError, OverflowError):
+        return {}
+    return out
 
 
 def read_inherit_types(path) -> dict:
@@ -94,30 +107,9 @@ def read_inherit_types(path) -> dict:
     (0 RrSs... FbxTransform::EInheritType: 0 eInheritRrSs, 1 eInheritRSrs, 2 eInheritRrs; Maya's
     joints with segment scale compensation are 2).  Binary FBX only; ``{}`` when unreadable."""
     try:
-        with open(path, "rb") as fh:
-            data = fh.read()
-        if not data.startswith(_MAGIC):
-            return {}
-        nodes, props, sentinel = _walker(data)
-        out = {}
-        for top, _, _, children_at, end in nodes(27, len(data)):
-            if top != "Objects":
-                continue
-            for cname, p_at, p_n, c_children, c_end in nodes(children_at, end - sentinel + 1):
-                if cname != "Model" or p_n < 2:
-                    continue
-                vals = props(p_at, 2)
-                name = str(vals[1]).split("\x00")[0].split("::")[-1]
-                for pname, _, _, pc, pe in nodes(c_children, c_end - sentinel + 1):
-                    if pname != "Properties70":
-                        continue
-                    for q, q_at, q_n, _, _ in nodes(pc, pe - sentinel + 1):
-                        if q == "P" and q_n >= 5:
-                            v = props(q_at, q_n)
-                            if v[0] == "InheritType":
-                                out[name] = int(v[4])
-        return out
-    except (OSError, struct.error, IndexError, ValueError, UnicodeError, zlib_error):
+        return {name: int(p["InheritType"]) for name, p in _object_properties(path, "Model", ("InheritType",)).items()
+                if "InheritType" in p}
+    except (TypeError, ValueError, OverflowError):
         return {}
 
 
