@@ -51,7 +51,8 @@ class ColliderData:
     face_offsets (P+1,) / faces: CSR faces of each part, vert_offsets (P+1,) / verts: CSR
     vertices of each part, face_part (F,) first part holding each face; each part's faces are
     ordered along a Morton curve and cut into chunks: chunk_offsets (C+1,) into ``faces``,
-    part_chunks (P+1,) into the chunks. ``bounds``: the per-part data of the sound bounds
+    part_chunks (P+1,) into the chunks, chunk_vert_offsets (C+1,) / chunk_verts: CSR of each
+    chunk's distinct vertices (what its culling sphere is fitted to). ``bounds``: the per-part data of the sound bounds
     (:class:`runtime.kernels.bounds.BoundData`), for culling and certifying spheres without
     skinning.  Matrices are column-vector (``p' = M @ p``, :mod:`runtime.schema`), converted from
     USD's row-vector layout once, here.
@@ -85,6 +86,8 @@ class ColliderData:
     face_part: np.ndarray
     chunk_offsets: np.ndarray
     part_chunks: np.ndarray
+    chunk_vert_offsets: np.ndarray
+    chunk_verts: np.ndarray
     bounds: BoundData
     clips: list = field(default_factory=list)
     static_local_to_world: np.ndarray | None = None
@@ -214,6 +217,18 @@ def _chunk_parts(points, triangles, face_offsets, faces, size=CHUNK_FACES):
             chunk_offsets.append(b)
         part_chunks.append(len(chunk_offsets) - 1)
     return out, np.array(chunk_offsets, dtype=np.int64), np.array(part_chunks, dtype=np.int64)
+
+
+def _chunk_vertices(triangles, faces, chunk_offsets):
+    """CSR of each chunk's distinct vertices: (chunk_vert_offsets (C+1,) int64, chunk_verts
+    int64), each chunk's vertices ascending."""
+    C = len(chunk_offsets) - 1
+    chunk = np.repeat(np.arange(C, dtype=np.int64), np.diff(chunk_offsets))
+    corners = triangles[faces[:chunk_offsets[-1]]]  # (n, 3)
+    V = int(triangles.max()) + 1 if triangles.size else 1
+    key = np.unique(np.repeat(chunk, 3) * V + corners.reshape(-1))
+    offsets = np.searchsorted(key // V, np.arange(C + 1), side="left").astype(np.int64)
+    return offsets, key % V
 
 
 def blend_shapes(mesh) -> str:
@@ -381,6 +396,7 @@ def _read(path) -> ColliderData:
         raise ColliderError(f"{where}faces: {int((face_part < 0).sum())} faces are in no part")
     vert_offsets, verts = schema.part_vertex_csr(tris, offs, faces, V)
     faces, chunk_offsets, part_chunks = _chunk_parts(pts.astype(np.float64), tris, offs, faces)
+    chunk_vert_offsets, chunk_verts = _chunk_vertices(tris, faces, chunk_offsets)
     bounds = bound_data(pts, ji, jw, geom_bind, bind, part_joint, centers, radii, vert_offsets, verts)
 
     clips = [read_clip(a, joint_index) for a in anims]
@@ -402,6 +418,7 @@ def _read(path) -> ColliderData:
         part_joint=part_joint, part_centers=np.ascontiguousarray(centers), part_radii=radii,
         face_offsets=offs, faces=faces, vert_offsets=vert_offsets, verts=verts,
         face_part=face_part, chunk_offsets=chunk_offsets, part_chunks=part_chunks,
+        chunk_vert_offsets=chunk_vert_offsets, chunk_verts=chunk_verts,
         bounds=bounds, clips=clips, static_local_to_world=l2w,
         stage=stage if l2w is None else None,
     )

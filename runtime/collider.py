@@ -494,11 +494,11 @@ class Pose:
     def _lazy(self):
         d = self._data
         return (self._full, d.rest_points, d.joint_indices, d.joint_weights,
-                self._skin_world, d.vert_offsets, d.verts)
+                self._skin_world, d.vert_offsets, d.verts, d.chunk_vert_offsets, d.chunk_verts)
 
     def _all_chunks(self):
         d = self._data
-        K._all_chunk_spheres(self._points, d.triangles, d.faces, d.chunk_offsets, d.part_chunks,
+        K._all_chunk_spheres(self._points, d.chunk_vert_offsets, d.chunk_verts, d.part_chunks,
                              self.chunk_spheres, self._ready, self._version)
 
     def _scratch(self):

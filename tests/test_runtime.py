@@ -444,6 +444,25 @@ def test_overlapping_parts_dedup_and_first_part(query_path):
         assert (parts.face_count[h.triangle] > 1).mean() > 0.5
 
 
+def test_chunk_spheres_bound_their_faces(query_path):
+    """The second culling level: each chunk's vertex CSR is exactly the distinct corners of its
+    faces, and on a fresh pose every corner lies in its chunk's sphere (so skipping a chunk, or
+    a face whose box is out of reach, never drops a contact; the every-frame test above checks
+    the answers)."""
+    col = load_collider(query_path("creature-any"))
+    d = col.data
+    for c in range(len(d.chunk_offsets) - 1):
+        corners = np.unique(d.triangles[d.faces[d.chunk_offsets[c]:d.chunk_offsets[c + 1]]])
+        assert np.array_equal(d.chunk_verts[d.chunk_vert_offsets[c]:d.chunk_vert_offsets[c + 1]], corners)
+    pose = col.pose("walk", 17.25)
+    pose.points  # skinned first, as the parallel ray path does before _all_chunks
+    pose._all_chunks()
+    for c in range(len(d.chunk_offsets) - 1):
+        v = pose.points[d.chunk_verts[d.chunk_vert_offsets[c]:d.chunk_vert_offsets[c + 1]]].astype(np.float64)
+        s = pose.chunk_spheres[c]
+        assert np.linalg.norm(v - s[:3], axis=1).max() <= s[3]
+
+
 def test_closest_point_kernel():
     rng = np.random.default_rng(5)
     pts = rng.normal(size=(300, 3)).astype(np.float32)

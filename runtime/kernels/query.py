@@ -18,15 +18,15 @@ from .skin import _skin_subset
 
 
 @njit(cache=True)
-def _prepare_part(p, skinned, rest, joint_indices, joint_weights, skin,
-                  vert_offsets, verts, points, triangles, faces, chunk_offsets, part_chunks,
-                  chunk_sph):
-    """Make part ``p`` queryable at this pose: skin its vertices (unless ``skinned``), then
-    compute its chunk spheres."""
-    if not skinned:
-        _skin_subset(verts, vert_offsets[p], vert_offsets[p + 1], rest, joint_indices, joint_weights, skin,
-                     points)
-    _chunk_spheres(p, points, triangles, faces, chunk_offsets, part_chunks, chunk_sph)
+def _prepare_part(p, version, lz, points, part_chunks, chunk_sph):
+    """Make part ``p`` queryable at pose ``version``: skin its vertices (unless the whole skin
+    is at this version), then compute its chunk spheres.  ``lz`` is what that needs (built by
+    ``Pose._lazy``): (version fully skinned, rest points, joint indices, joint weights,
+    skinning transforms, the parts' vertex CSR offsets and vertices, the chunks' vertex CSR
+    offsets and vertices)."""
+    if lz[0] != version:
+        _skin_subset(lz[6], lz[5][p], lz[5][p + 1], lz[1], lz[2], lz[3], lz[4], points)
+    _chunk_spheres(p, points, lz[7], lz[8], part_chunks, chunk_sph)
 
 
 # -- ray casting -------------------------------------------------------------------------------
@@ -68,23 +68,31 @@ def _mt(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, cx, cy, cz):
 
 
 @njit(cache=True)
-def _chunk_spheres(p, points, triangles, faces, chunk_offsets, part_chunks, chunk_sph):
+def _chunk_spheres(p, points, chunk_vert_offsets, chunk_verts, part_chunks, chunk_sph):
     """Bounding spheres of part ``p``'s chunks (a few faces each) on the posed points:
-    centre = box centre of the chunk's vertices, radius = half the box diagonal (padded)."""
+    centre = box centre of the chunk's vertices, radius = half the box diagonal (padded).
+    Each chunk's distinct vertices are read once (``chunk_vert_offsets`` / ``chunk_verts``, a
+    CSR built at load: a 16-face chunk has ~15 of them against 48 face corners)."""
     for c in range(part_chunks[p], part_chunks[p + 1]):
-        lo0 = lo1 = lo2 = np.inf
-        hi0 = hi1 = hi2 = -np.inf
-        for i in range(chunk_offsets[c], chunk_offsets[c + 1]):
-            f = faces[i]
-            for k in range(3):
-                q = triangles[f, k]
-                x, y, z = points[q, 0], points[q, 1], points[q, 2]
-                lo0 = min(lo0, x)
-                lo1 = min(lo1, y)
-                lo2 = min(lo2, z)
-                hi0 = max(hi0, x)
-                hi1 = max(hi1, y)
-                hi2 = max(hi2, z)
+        q = chunk_verts[chunk_vert_offsets[c]]  # a chunk has at least one face
+        lo0 = hi0 = np.float64(points[q, 0])
+        lo1 = hi1 = np.float64(points[q, 1])
+        lo2 = hi2 = np.float64(points[q, 2])
+        for i in range(chunk_vert_offsets[c] + 1, chunk_vert_offsets[c + 1]):
+            q = chunk_verts[i]
+            x, y, z = points[q, 0], points[q, 1], points[q, 2]
+            if x < lo0:
+                lo0 = x
+            if x > hi0:
+                hi0 = x
+            if y < lo1:
+                lo1 = y
+            if y > hi1:
+                hi1 = y
+            if z < lo2:
+                lo2 = z
+            if z > hi2:
+                hi2 = z
         cx, cy, cz = 0.5 * (lo0 + hi0), 0.5 * (lo1 + hi1), 0.5 * (lo2 + hi2)
         hx, hy, hz = 0.5 * (hi0 - lo0), 0.5 * (hi1 - lo1), 0.5 * (hi2 - lo2)
         r2 = hx * hx + hy * hy + hz * hz  # the sphere around the box: one pass over the chunk
@@ -95,11 +103,11 @@ def _chunk_spheres(p, points, triangles, faces, chunk_offsets, part_chunks, chun
 
 
 @njit(cache=True, parallel=True)
-def _all_chunk_spheres(points, triangles, faces, chunk_offsets, part_chunks, chunk_sph, ready, version):
+def _all_chunk_spheres(points, chunk_vert_offsets, chunk_verts, part_chunks, chunk_sph, ready, version):
     """Chunk spheres of every part not yet ``ready`` at this pose ``version``."""
     for p in prange(part_chunks.shape[0] - 1):
         if ready[p] != version:
-            _chunk_spheres(p, points, triangles, faces, chunk_offsets, part_chunks, chunk_sph)
+            _chunk_spheres(p, points, chunk_vert_offsets, chunk_verts, part_chunks, chunk_sph)
             ready[p] = version
 
 
@@ -132,8 +140,7 @@ def _ray_one(r, origins, directions, max_distance, points, triangles, cull, face
             if not _ray_enters(ox, oy, oz, dx, dy, dz, cull[p, 0], cull[p, 1], cull[p, 2], cull[p, 3], best):
                 continue
             if ready[p] != version:
-                _prepare_part(p, lz[0] == version, lz[1], lz[2], lz[3], lz[4], lz[5],
-                              lz[6], points, triangles, faces, chunk_offsets, part_chunks, chunk_sph)
+                _prepare_part(p, version, lz, points, part_chunks, chunk_sph)
                 ready[p] = version
             for c in range(part_chunks[p], part_chunks[p + 1]):
                 if not _ray_enters(ox, oy, oz, dx, dy, dz, chunk_sph[c, 0], chunk_sph[c, 1],
@@ -291,6 +298,24 @@ def _closest_on_triangle(px, py, pz, points, ia, ib, ic, out):
     out[5] = w
 
 
+@njit(cache=True, inline="always")
+def _box_gap2(px, py, pz, points, ia, ib, ic):
+    """Squared distance from ``(px, py, pz)`` to the bounding box of triangle (ia, ib, ic): a
+    lower bound of the squared distance to the triangle, so a face whose box is beyond the
+    radius is skipped before the closest-point test (most faces of a reached chunk are)."""
+    g = 0.0
+    for k in range(3):
+        a, b, c = np.float64(points[ia, k]), np.float64(points[ib, k]), np.float64(points[ic, k])
+        q = px if k == 0 else (py if k == 1 else pz)
+        lo = min(a, min(b, c))
+        hi = max(a, max(b, c))
+        if q < lo:
+            g += (lo - q) * (lo - q)
+        elif q > hi:
+            g += (q - hi) * (q - hi)
+    return g
+
+
 @njit(cache=True)
 def _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n, tri_out, point_out,
                    normal_out, depth_out, bary_out):
@@ -349,8 +374,7 @@ def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offse
             if dx * dx + dy * dy + dz * dz > rr * rr:
                 continue
             if ready[p] != version:
-                _prepare_part(p, lz[0] == version, lz[1], lz[2], lz[3], lz[4], lz[5],
-                              lz[6], points, triangles, faces, chunk_offsets, part_chunks, chunk_sph)
+                _prepare_part(p, version, lz, points, part_chunks, chunk_sph)
                 ready[p] = version
             for c in range(part_chunks[p], part_chunks[p + 1]):
                 dx = chunk_sph[c, 0] - px
@@ -364,8 +388,10 @@ def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offse
                     if mark[f] == stamp:
                         continue
                     mark[f] = stamp
-                    _closest_on_triangle(px, py, pz, points, triangles[f, 0], triangles[f, 1],
-                                         triangles[f, 2], tmp)
+                    ia, ib, ic = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+                    if _box_gap2(px, py, pz, points, ia, ib, ic) > r2:  # its box is out of reach
+                        continue
+                    _closest_on_triangle(px, py, pz, points, ia, ib, ic, tmp)
                     dx, dy, dz = px - tmp[0], py - tmp[1], pz - tmp[2]
                     d2 = dx * dx + dy * dy + dz * dz
                     if d2 <= r2:
