@@ -16,6 +16,7 @@ Queries work in float64 on the float32 posed points.  Matrices are column-vector
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -253,6 +254,15 @@ def get_backend(backend):
 # -- pose --------------------------------------------------------------------------------------
 
 
+def _point(a):
+    """``a`` as a contiguous (3,) float64 array, or None when it is not 3 finite numbers (a
+    per-query check: the scalar tests cost a fifth of ``np.isfinite(a).all()``)."""
+    c = np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(-1))
+    if c.shape != (3,) or not (math.isfinite(c[0]) and math.isfinite(c[1]) and math.isfinite(c[2])):
+        return None
+    return c
+
+
 def _vec3s(a, name):
     a = np.asarray(a, dtype=np.float64)
     if a.ndim == 1 and a.shape[0] == 3:
@@ -447,34 +457,64 @@ class Pose:
 
     def sphere_contacts(self, center, radius, backend=None) -> SphereContacts:
         """Every triangle whose closest point lies within ``radius`` of ``center`` (3,)."""
-        c = np.ascontiguousarray(np.asarray(center, dtype=np.float64).reshape(-1))
-        if c.shape != (3,) or not np.isfinite(c).all():
+        c = _point(center)
+        if c is None:
             raise ValueError(f"center must be 3 finite numbers, got {center!r}")
         r = float(radius)
-        if not (r >= 0 and np.isfinite(r)):
+        if not (r >= 0 and math.isfinite(r)):
             raise ValueError(f"radius must be finite and >= 0, got {radius!r}")
         return (get_backend(backend) or self.collider.backend).sphere_contacts(self, c, r)
 
     def track(self, triangles, barycentric) -> np.ndarray:
-        """(C, 3) stage positions of surface points (triangle index + barycentric (C, 3|2))."""
+        """(C, 3) stage positions of surface points (triangle index + barycentric (C, 3|2)).
+        Skins only the parts holding those triangles (lazy, as the queries)."""
         sp = SurfacePoints(triangles, barycentric)
-        F = len(self._data.triangles)
-        if len(sp) and (sp.triangles.min() < 0 or sp.triangles.max() >= F):
-            raise ValueError(f"triangle index out of range 0..{F - 1}")
+        self._ready_faces(sp.triangles)
         out = np.empty((len(sp), 3))
-        K._surface_points(self.points, self._data.triangles, sp.triangles, sp.barycentric, out)
+        K._surface_points(self._points, self._data.triangles, sp.triangles, sp.barycentric, out)
+        return out
+
+    def surface_frame(self, surface: "SurfacePoints", out=None) -> np.ndarray:
+        """(6,) float64: the centroid of ``surface``'s points and the unit mean of their
+        triangles' unit normals (counter-clockwise = outward; zeros when they cancel or there are
+        none) - ``track(...).mean(0)`` and the normalised ``face_normals(...).sum(0)`` in one
+        pass, skinning only the parts holding the triangles.  A contact patch's frame: how the
+        patch moves and turns from one pose to the next (:mod:`runtime.controller` carries its
+        player with it).  ``out``: an optional (6,) float64 array to write into."""
+        if not isinstance(surface, SurfacePoints):
+            raise TypeError(f"surface must be SurfacePoints, got {type(surface).__name__}")
+        if out is None:
+            out = np.empty(6)
+        elif not (isinstance(out, np.ndarray) and out.shape == (6,) and out.dtype == np.float64
+                  and out.flags.c_contiguous and out.flags.writeable):
+            raise ValueError("out must be a writable contiguous (6,) float64 array")
+        if self._full != self._version:
+            self._ready_faces(surface.triangles)
+        if not K._surface_frame(self._points, self._data.triangles, surface.triangles, surface.barycentric, out):
+            raise ValueError(f"triangle index out of range 0..{len(self._data.triangles) - 1}")
         return out
 
     def face_normals(self, triangles=None) -> np.ndarray:
         """(n, 3) unit geometric normals (counter-clockwise = outward) of ``triangles`` (all)."""
-        return self._normals(self.points, triangles)
+        if triangles is None:
+            return self._normals(self.points, None)
+        tri = np.ascontiguousarray(np.asarray(triangles, dtype=np.int64).ravel())
+        self._ready_faces(tri)
+        return self._normals(self._points, tri)
 
     def _normals(self, points, triangles):
-        tri = (np.arange(len(self._data.triangles)) if triangles is None
-               else np.ascontiguousarray(np.asarray(triangles, dtype=np.int64).ravel()))
+        tri = np.arange(len(self._data.triangles)) if triangles is None else triangles
         out = np.empty((len(tri), 3))
         K._face_normals(points, self._data.triangles, tri, out)
         return out
+
+    def _ready_faces(self, tri):
+        """Skin the corners of triangles ``tri`` (int64, contiguous) at this pose, if not yet;
+        ValueError on an index out of range."""
+        d = self._data
+        if not K._ready_faces(tri, d.face_part, self._ready, self._version, self._lazy(), self._points,
+                              d.part_chunks, self.chunk_spheres):
+            raise ValueError(f"triangle index out of range 0..{len(d.triangles) - 1}")
 
     @property
     def points(self) -> np.ndarray:

@@ -2,9 +2,10 @@
 
 A sphere of ``radius`` stands, slides, holds (climbs), hangs and falls on a deforming triangle
 mesh.  It uses only the public collider API: :meth:`Pose.sphere_contacts`,
-:meth:`Pose.raycast`, surface points (:class:`SurfacePoints`, :meth:`Pose.track`) and, for the
-per-step frame of its contacts (where :meth:`Pose.track` and :meth:`Pose.face_normals` would
-take two calls), :attr:`Pose.points` and :attr:`Collider.triangles`.  The anchors are game engines' kinematic character controllers - Jolt's
+:meth:`Pose.raycast`, surface points (:class:`SurfacePoints`, :meth:`Pose.track`) and the
+per-step frame of its contacts (:meth:`Pose.surface_frame`).  None of them skins more than the
+parts they reach, so a game that only moves players never pays for the whole skin.  The
+anchors are game engines' kinematic character controllers - Jolt's
 ``CharacterVirtual`` (max slope, stick to floor, ground velocity), Godot's
 ``CharacterBody3D.move_and_slide`` (floor max angle, platform velocity, floor snap), Unity's
 ``CharacterController`` (slope limit, skin width), PhysX's CCT - none of which works on a
@@ -279,44 +280,6 @@ def _summarize(normal, depth, skin, tol, up, cos_slope, cap, ground, out):
 
 
 @njit(cache=True)
-def _surface_frame(points, triangles, tri, bary, out):
-    """The frame of surface points (tri (C,), barycentric bary (C, 3)) on the posed ``points``
-    (V, 3) float32: out (6,) = [centroid of the points, unit mean of their triangles' unit
-    normals (counter-clockwise = outward; zeros if they cancel)].  What ``Pose.track`` and
-    ``Pose.face_normals`` give, fused into one pass for the controller's per-step budget."""
-    for k in range(6):
-        out[k] = 0.0
-    C = tri.shape[0]
-    for i in range(C):
-        f = tri[i]
-        a, b, c = triangles[f, 0], triangles[f, 1], triangles[f, 2]
-        ax, ay, az = np.float64(points[a, 0]), np.float64(points[a, 1]), np.float64(points[a, 2])
-        bx, by, bz = np.float64(points[b, 0]), np.float64(points[b, 1]), np.float64(points[b, 2])
-        cx, cy, cz = np.float64(points[c, 0]), np.float64(points[c, 1]), np.float64(points[c, 2])
-        u, v, w = bary[i, 0], bary[i, 1], bary[i, 2]
-        out[0] += u * ax + v * bx + w * cx
-        out[1] += u * ay + v * by + w * cy
-        out[2] += u * az + v * bz + w * cz
-        e1x, e1y, e1z = bx - ax, by - ay, bz - az
-        e2x, e2y, e2z = cx - ax, cy - ay, cz - az
-        nx = e1y * e2z - e1z * e2y
-        ny = e1z * e2x - e1x * e2z
-        nz = e1x * e2y - e1y * e2x
-        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if ln > 0.0:
-            out[3] += nx / ln
-            out[4] += ny / ln
-            out[5] += nz / ln
-    if C > 0:
-        for k in range(3):
-            out[k] /= C
-    ln = math.sqrt(out[3] * out[3] + out[4] * out[4] + out[5] * out[5])
-    if ln > 0.0:
-        for k in range(3, 6):
-            out[k] /= ln
-
-
-@njit(cache=True)
 def _carry(pos, f0, f1, dt, out, vel):
     """Carry ``pos`` (3,) with a surface frame: f0, f1 (6,) are the frames (centroid, unit mean
     normal) before and after.  out (3,) = c1 + R (pos - c0), R the least rotation taking n0 to
@@ -475,7 +438,6 @@ class CharacterController:
         self.max_iterations = int(max_iterations)
         self.floor = None if floor is None else _finite("floor", floor)
         self.up = np.ascontiguousarray(collider.up, dtype=np.float64)
-        self._triangles = np.ascontiguousarray(collider.triangles, dtype=np.int64)
         self._g = -self.up * self.gravity
         self._cos_slope = math.cos(math.radians(self.max_slope))
         self._feel = r + self.skin
@@ -504,7 +466,8 @@ class CharacterController:
     @property
     def anchors(self) -> SurfacePoints | None:
         """The contacts carried into the next step, as surface points (None: none)."""
-        return None if self._atri is None else SurfacePoints(self._atri, self._abary)
+        a = self._anchors
+        return None if a is None else SurfacePoints(a.triangles.copy(), a.barycentric.copy())
 
     def step(self, pose_prev: Pose, pose_next: Pose, dt: float, intent: Intent | None = None) -> Step:
         """Advance the player from ``pose_prev`` to ``pose_next`` over ``dt`` seconds (> 0) with
@@ -522,7 +485,7 @@ class CharacterController:
         self._queries = 0
         pos = self.position
         state = self.state
-        anchored = self._atri is not None
+        anchored = self._anchors is not None
         # 1. carry along the previous contacts
         if anchored:
             pos = np.empty(3)
@@ -774,12 +737,12 @@ class CharacterController:
             return
         else:
             tri, bary = touch.triangle[mask], touch.barycentric[mask]
-        self._atri, self._abary = tri, bary
+        self._anchors = SurfacePoints(tri, bary)
         self._frame_key = _pose_key(pose)
         self._frame_val = self._frame_now(pose)
 
     def _unanchor(self):
-        self._atri = self._abary = None
+        self._anchors = None
         self._frame_key = self._frame_val = None
 
     def _frame_on(self, pose):
@@ -791,9 +754,7 @@ class CharacterController:
         return self._frame_now(pose)
 
     def _frame_now(self, pose):
-        out = np.empty(6)
-        _surface_frame(pose.points, self._triangles, self._atri, self._abary, out)
-        return out
+        return pose.surface_frame(self._anchors)
 
     def _contact_velocity(self, pose_prev, touch, dt):
         """(3,) mean velocity of the touched surface points from ``pose_prev`` to now (the

@@ -15,7 +15,7 @@ import pytest
 from runtime import load_collider
 from runtime.controller import (FALLING, HANGING, HOLDING, SLIDING, STANDING, CharacterController,
                                 Intent, carry_point, resolve_push)
-from runtime.controller import _along, _surface_frame
+from runtime.controller import _along
 from runtime.script import start_position
 from usd_reference import UsdSkelReference
 from test_runtime_naive import (closest_point_on_triangles, inside_closed_mesh, naive_along,
@@ -118,27 +118,6 @@ def settle(ctrl, pose, steps=5):
 # -- the kernels against their numpy references ---------------------------------------------
 
 
-def test_surface_frame_kernel_matches_track_and_face_normals(limb):
-    """The controller's fused frame of its contacts: Pose.track's points and Pose.face_normals'
-    normals, and a numpy transcription on the same points."""
-    rng = np.random.default_rng(5)
-    pose = limb.pose("bend", 7.5)
-    T = limb.triangles
-    for C in (1, 2, 5, 40):
-        tri = rng.integers(0, len(T), C)
-        bary = rng.dirichlet([1, 1, 1], C)
-        out = np.empty(6)
-        _surface_frame(pose.points, T, tri, bary, out)
-        m = pose.face_normals(tri).sum(0)
-        assert np.allclose(out[:3], pose.track(tri, bary).mean(0), atol=1e-9)
-        assert np.allclose(out[3:], m / np.linalg.norm(m), atol=1e-9)
-        P = pose.points.astype(np.float64)[T[tri]]  # numpy: (C, 3 corners, 3)
-        n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
-        n = (n / np.linalg.norm(n, axis=1, keepdims=True)).sum(0)
-        assert np.allclose(out[:3], np.einsum("ck,ckj->j", bary, P) / C, atol=1e-9)
-        assert np.allclose(out[3:], n / np.linalg.norm(n), atol=1e-9)
-
-
 def test_kernels_match_numpy_references():
     rng = np.random.default_rng(7)
     for _ in range(200):
@@ -204,6 +183,31 @@ def test_standing_still_through_the_whole_walk(creature, creature_ref, where):
     # ... and on the way (the back: at every moment; the thin tail bends under the sphere)
     assert max(drift) < (0.01 * seconds if where == "back" else 0.05) * r, max(drift) / r
     assert max(depth) < 0.01 * r, max(depth) / r  # penetration (brute force on usd-core points)
+
+
+def test_steps_skin_only_the_parts_they_reach(creature):
+    """A player walking on lazily posed frames never makes the pose skin the whole mesh, and
+    moves bit for bit as one on fully skinned frames (the lazy path is the same kernel)."""
+    col = creature
+    r = 0.035 * col.size()
+    start = start_position(col, "walk", r, 0.0)
+    runs = []
+    for full in (False, True):
+        ctrl = CharacterController(col, r, position=start)
+        a, b = col.pose("walk", 0.0), col.pose("walk", 0.0)
+        rows = []
+        for k in range(90):
+            b = col.pose("walk", clip_time(col, "walk", (k + 1) * col.data.time_codes_per_second / RATE), out=b)
+            if full:
+                b.points
+            s = ctrl.step(a, b, 1 / RATE, Intent(move=(1, 0, 0), jump=k == 40))
+            if not full:
+                assert b._full != b._version, k  # private flag: there is no public one
+            rows.append((s.state, s.triangle, *s.position, *s.velocity))
+            a, b = b, a
+        runs.append(rows)
+    assert runs[0] == runs[1]
+    assert {row[0] for row in runs[0]} >= {STANDING, FALLING}
 
 
 def _slope_spot(col, pose, r, lo=25.0, hi=40.0):

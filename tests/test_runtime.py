@@ -505,6 +505,42 @@ def test_surface_points_carried_by_skin(limb):
         a.track([10 ** 9], [[1, 0, 0]])
 
 
+def test_surface_frame_and_tracking_are_lazy(creature):
+    """Pose.surface_frame (a contact patch's centroid and mean normal), Pose.track and
+    Pose.face_normals on a fresh pose skin only the parts holding their triangles, and agree
+    with a numpy transcription on the points read afterwards."""
+    rng = np.random.default_rng(5)
+    T = creature.triangles
+    pose = None
+    for k, C in enumerate((1, 2, 5, 40)):
+        pose = creature.pose("walk", 3.5 + 7 * k, out=pose)
+        first = rng.integers(0, len(T))
+        tri = np.clip(first + rng.integers(0, 30, C), 0, len(T) - 1)  # a patch: a few parts at most
+        bary = rng.dirichlet([1, 1, 1], C)
+        out = pose.surface_frame(SurfacePoints(tri, bary))
+        at = pose.track(tri, bary)
+        nrm = pose.face_normals(tri)
+        assert pose._full != pose._version  # still lazy (private flag: there is no public one)
+        P = pose.points.astype(np.float64)[T[tri]]  # numpy: (C, 3 corners, 3)
+        n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+        n = n / np.linalg.norm(n, axis=1, keepdims=True)
+        assert np.allclose(at, np.einsum("ck,ckj->cj", bary, P), atol=1e-9)
+        assert np.allclose(nrm, n, atol=1e-9)
+        assert np.allclose(out[:3], at.mean(0), atol=1e-9)
+        assert np.allclose(out[3:], n.sum(0) / np.linalg.norm(n.sum(0)), atol=1e-9)
+        again = np.full(6, np.nan)
+        assert pose.surface_frame(SurfacePoints(tri, bary), out=again) is again and np.array_equal(again, out)
+    assert np.array_equal(pose.surface_frame(SurfacePoints([], np.zeros((0, 3)))), np.zeros(6))
+    with pytest.raises(ValueError, match="out of range"):
+        pose.surface_frame(SurfacePoints([len(T)], [[1, 0, 0]]))
+    with pytest.raises(ValueError, match="out of range"):
+        pose.face_normals([-1])
+    with pytest.raises(TypeError):
+        pose.surface_frame(([0], [[1, 0, 0]]))
+    with pytest.raises(ValueError, match="out must be"):
+        pose.surface_frame(SurfacePoints([0], [[1, 0, 0]]), out=np.empty(6, dtype=np.float32))
+
+
 # -- any pose (IK, ragdoll): pose_from_joints --------------------------------------------------
 
 

@@ -413,6 +413,69 @@ def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offse
 
 
 @njit(cache=True)
+def _ready_faces(tri, face_part, ready, version, lz, points, part_chunks, chunk_sph):
+    """Make the corners of triangles ``tri`` valid at pose ``version`` without skinning the
+    rest: prepare (:func:`_prepare_part`) each holding part not yet ``ready``.  Returns False,
+    touching nothing, when an index is outside ``0 .. len(face_part) - 1``."""
+    F = face_part.shape[0]
+    for i in range(tri.shape[0]):
+        if tri[i] < 0 or tri[i] >= F:
+            return False
+    if lz[0] == version:
+        return True
+    for i in range(tri.shape[0]):
+        p = face_part[tri[i]]
+        if ready[p] != version:
+            _prepare_part(p, version, lz, points, part_chunks, chunk_sph)
+            ready[p] = version
+    return True
+
+
+@njit(cache=True)
+def _surface_frame(points, triangles, tri, bary, out):
+    """The frame of surface points (tri (C,), barycentric bary (C, 3)) on the posed ``points``
+    (V, 3) float32: out (6,) = [centroid of the points, unit mean of their triangles' unit
+    normals (counter-clockwise = outward; zeros if they cancel or C = 0)].  What
+    :func:`_surface_points` and :func:`_face_normals` give, fused into one pass.  Returns False,
+    writing nothing, when an index is outside ``0 .. len(triangles) - 1``."""
+    C = tri.shape[0]
+    F = triangles.shape[0]
+    for i in range(C):
+        if tri[i] < 0 or tri[i] >= F:
+            return False
+    for k in range(6):
+        out[k] = 0.0
+    for i in range(C):
+        f = tri[i]
+        a, b, c = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+        ax, ay, az = np.float64(points[a, 0]), np.float64(points[a, 1]), np.float64(points[a, 2])
+        bx, by, bz = np.float64(points[b, 0]), np.float64(points[b, 1]), np.float64(points[b, 2])
+        cx, cy, cz = np.float64(points[c, 0]), np.float64(points[c, 1]), np.float64(points[c, 2])
+        u, v, w = bary[i, 0], bary[i, 1], bary[i, 2]
+        out[0] += u * ax + v * bx + w * cx
+        out[1] += u * ay + v * by + w * cy
+        out[2] += u * az + v * bz + w * cz
+        e1x, e1y, e1z = bx - ax, by - ay, bz - az
+        e2x, e2y, e2z = cx - ax, cy - ay, cz - az
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if ln > 0.0:
+            out[3] += nx / ln
+            out[4] += ny / ln
+            out[5] += nz / ln
+    if C > 0:
+        for k in range(3):
+            out[k] /= C
+    ln = math.sqrt(out[3] * out[3] + out[4] * out[4] + out[5] * out[5])
+    if ln > 0.0:
+        for k in range(3, 6):
+            out[k] /= ln
+    return True
+
+
+@njit(cache=True)
 def _surface_points(points, triangles, tri, bary, out):
     """World positions of barycentric points on triangles: out[i] = sum_k bary[i,k] * p[tri[i],k]."""
     for i in range(tri.shape[0]):
