@@ -27,7 +27,12 @@ What the child does differently from an in-process call:
 Forking a multi-threaded process is delicate: only the forking thread exists in the child.  The
 child only runs the readers (numpy, assimp, usd-core: no numba kernel, no thread of ours), the
 command line reads before any parallel kernel runs, and the parent's timeout bounds a child that
-would hang on a lock some other thread held at fork time.  Python's "this process is
+would hang on a lock some other thread held at fork time.  Such a child sleeps and uses no CPU
+(usd-core's worker threads free stages in the background: forking while one holds a lock
+usd-core's reader then needs leaves the child waiting forever).  So on Linux the parent watches
+its child: one that has slept without using any CPU for :data:`STALL_SECONDS` is killed and
+forked again, once (the lock's holder, in the parent, has long finished by then); a second
+stall waits for the timeout as before.  Python's "this process is
 multi-threaded, use of fork() may lead to deadlocks" ``DeprecationWarning`` is silenced for that
 reason.  Where ``os.fork`` does not exist, or ``COLOSSUS_ISOLATE=0``, the call runs in-process.
 
@@ -55,6 +60,13 @@ from .errors import ColossusError, InputError, one_line
 #: Seconds a contained read may take before its child is killed (``COLOSSUS_READ_TIMEOUT``
 #: overrides); generous: the 200,000-triangle benchmark file reads in about a second.
 READ_TIMEOUT = 600.0
+
+#: Seconds a contained child may sleep without using any CPU before it is taken as deadlocked
+#: at the fork (a lock some other thread of the parent held) and forked again, once.
+STALL_SECONDS = 20.0
+
+#: How often the parent looks at its child's CPU time (seconds).
+_STALL_TICK = 1.0
 
 #: Extra address space the reading child may map, as a multiple of the readers' own allocation
 #: budget (:class:`pipeline.readers.common.AllocationBudget`): that budget counts the arrays the
@@ -100,6 +112,18 @@ def _data_size() -> int:
     except (OSError, ValueError, IndexError):
         pass
     return 0
+
+
+def _progress(pid: int):
+    """(state, CPU ticks used) of process ``pid`` from Linux ``/proc`` (all its threads), or None
+    when unknown."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            text = fh.read()
+        fields = text[text.rindex(b")") + 2:].split()  # after "pid (comm) ": state is field 3
+        return fields[0].decode(), int(fields[11]) + int(fields[12])  # utime + stime
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 def _test_hook(path: str) -> None:
@@ -251,7 +275,7 @@ def contained(fn, *args, path: str = "", timeout: float | None = None, memory: i
     path : str
         The file the call is about (for the test hook only).
     timeout : float, optional
-        Seconds before the child is killed (None: no limit).
+        Seconds before the child is killed (None: no limit), a re-fork after a stall included.
     memory : int, optional
         Bytes of address space the child may add to what it has at the fork (None: no cap).
 
@@ -264,6 +288,19 @@ def contained(fn, *args, path: str = "", timeout: float | None = None, memory: i
     """
     if not available():
         return fn(*args, **kwargs)
+    deadline = None if timeout is None else time.monotonic() + timeout
+    got = _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch=True)
+    if got is _STALLED:  # deadlocked at the fork: once more (the second is not watched)
+        got = _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch=False)
+    return got
+
+
+_STALLED = object()
+
+
+def _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch):
+    """One fork of :func:`contained`: the result, or :data:`_STALLED` when ``watch`` and the
+    child slept without using CPU for :data:`STALL_SECONDS` (it was killed)."""
     for stream in (sys.stdout, sys.stderr):  # buffered text must not be written twice
         try:
             stream.flush()
@@ -297,17 +334,30 @@ def contained(fn, *args, path: str = "", timeout: float | None = None, memory: i
             _child(out.fileno(), err.fileno(), fn, args, kwargs, path, memory)
         os.close(write_fd)
         status, reason = None, None
-        deadline = None if timeout is None else time.monotonic() + timeout
+        still = (None, time.monotonic())  # (last CPU ticks seen, since when)
         try:
             while True:
                 wait = None if deadline is None else max(0.0, deadline - time.monotonic())
+                if watch:
+                    wait = _STALL_TICK if wait is None else min(wait, _STALL_TICK)
                 ready, _, _ = select.select([read_fd], [], [], wait)
-                if not ready:
+                if ready:
+                    if not os.read(read_fd, 1):  # the child never writes here: EOF is its exit
+                        break
+                    continue
+                if deadline is not None and time.monotonic() >= deadline:
                     reason = f"timed out after {timeout:g} s"
                     os.kill(pid, signal.SIGKILL)
                     break
-                if not os.read(read_fd, 1):  # the child never writes here: EOF is its exit
-                    break
+                seen = _progress(pid)
+                if seen is None or seen[0] != "S" or seen[1] != still[0]:
+                    still = (None if seen is None or seen[0] != "S" else seen[1], time.monotonic())
+                elif time.monotonic() - still[1] >= STALL_SECONDS:  # asleep, no CPU: deadlocked
+                    os.kill(pid, signal.SIGKILL)
+                    os.waitpid(pid, 0)
+                    err.close()
+                    out.close()
+                    return _STALLED
         except BaseException:  # Ctrl-C (or anything) in the parent: the child goes too
             try:
                 os.kill(pid, signal.SIGKILL)

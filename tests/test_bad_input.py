@@ -11,6 +11,7 @@ import shutil
 import struct
 import subprocess
 import sys
+import time
 import warnings
 
 import numpy as np
@@ -345,6 +346,60 @@ def test_contained_call_quiet_and_fallback(capfd, monkeypatch):
         raise BlockingIOError(11, "Resource temporarily unavailable")
     monkeypatch.setattr(os, "fork", no_fork)
     assert contained(sum, [1, 2, 3]) == 6
+
+
+def test_contained_child_deadlocked_at_the_fork_is_forked_again(monkeypatch):
+    """Another thread holds a lock at the fork (as usd-core's background workers can): the child
+    inherits it held by a thread it does not have and sleeps forever.  Without the stall watch
+    that is a timeout (a false "took too long" after READ_TIMEOUT seconds); with it the child is
+    killed after STALL_SECONDS asleep without CPU and forked again, once the lock is free."""
+    import threading
+
+    from pipeline import isolation
+    from pipeline.isolation import ChildFailed, available, contained
+    if not available() or isolation._progress(os.getpid()) is None:
+        pytest.skip("needs os.fork and Linux /proc")
+    lock = threading.Lock()
+
+    def needs_the_lock():
+        with lock:
+            return 42
+
+    def hold(seconds, held):
+        with lock:
+            held.set()
+            time.sleep(seconds)
+
+    def race(hold_s, timeout):
+        held = threading.Event()
+        t = threading.Thread(target=hold, args=(hold_s, held))
+        t.start()
+        held.wait()
+        try:
+            t0 = time.monotonic()
+            try:
+                return contained(needs_the_lock, timeout=timeout), time.monotonic() - t0
+            except ChildFailed as e:
+                return e, time.monotonic() - t0
+        finally:
+            t.join()
+
+    monkeypatch.setattr(isolation, "_STALL_TICK", 0.1)
+    monkeypatch.setattr(isolation, "STALL_SECONDS", 1e9)  # no watch: the deadlock is real
+    got, _ = race(0.3, timeout=2.0)
+    assert isinstance(got, ChildFailed) and got.timed_out
+    monkeypatch.setattr(isolation, "STALL_SECONDS", 1.0)
+    got, seconds = race(0.3, timeout=30.0)
+    assert got == 42 and seconds < 10, (got, seconds)
+    # a child that works (uses CPU) for longer than STALL_SECONDS is not taken for a deadlock
+    assert contained(_spin, 2.5, timeout=30.0) > 0
+
+
+def _spin(seconds):
+    end, n = time.monotonic() + seconds, 0
+    while time.monotonic() < end:
+        n += 1
+    return n
 
 
 def test_reader_isolation_can_be_switched_off(work, monkeypatch):
