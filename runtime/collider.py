@@ -30,11 +30,12 @@ from .errors import ColliderError
 
 #: Above this many rays the parallel ray kernel is used.
 PARALLEL_RAYS = 256
-#: Above this many vertices skinning runs on every core (a one-thread pass over fewer costs less
-#: than waking the pool, and the threaded kernel compiles only for colliders this large: the demo
-#: creature, 5,056 vertices, never compiles it).  The runtime benchmark's 20,000-vertex collider
-#: is above it: on 2 quiet cores the threaded pass is 1.3-1.5x the one-thread one.
-PARALLEL_SKIN = 16_000
+#: Above this many vertices a pose's full skin runs on every core.  With the per-vertex kernel
+#: inlined (runtime.kernels.skin._lbs) one skinning pass is memory-bound: on this project's 2
+#: cores the one-thread pass is the faster one from 20,000 vertices (0.12 vs 0.15 ms) to 200,000
+#: (1.2 vs 1.8 ms), so the threaded kernel is kept for meshes far larger than any seen here (and
+#: compiles only for them).
+PARALLEL_SKIN = 1_000_000
 #: :meth:`Collider.pose_from_joints` grows a sphere that does not provably hold to the bound's
 #: radius when that is at most this many times the stored radius, else to the farthest skinned
 #: vertex of the part (exact, O(part vertices)).
