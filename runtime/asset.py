@@ -350,6 +350,9 @@ def _read(path) -> ColliderData:
     order = np.argsort(-jw, axis=1, kind="stable")
     ji = np.ascontiguousarray(np.take_along_axis(ji, order, 1))
     jw = np.ascontiguousarray(np.take_along_axis(jw, order, 1))
+    used = (jw != 0).any(0)  # influence slots no vertex uses (zero weights are never read)
+    if not used.all() and used.any():  # one pass over the skin is memory-bound: read less
+        ji, jw = np.ascontiguousarray(ji[:, used]), np.ascontiguousarray(jw[:, used])
     mesh_joints = binding.GetJointsAttr().Get() if binding.GetJointsAttr() else None
     if mesh_joints:  # skel:joints on the mesh: indices refer to that ordering
         remap = np.array([joint_index.get(str(j), -1) for j in mesh_joints], dtype=np.int32)
