@@ -89,6 +89,7 @@ class ColliderData:
     chunk_vert_offsets: np.ndarray
     chunk_verts: np.ndarray
     bounds: BoundData
+    faces_shared: bool = False  # some face is in more than one part (--parts any)
     clips: list = field(default_factory=list)
     static_local_to_world: np.ndarray | None = None
     stage: object = None  # kept open only when the skeleton's transform is animated
@@ -421,7 +422,7 @@ def _read(path) -> ColliderData:
         part_joint=part_joint, part_centers=np.ascontiguousarray(centers), part_radii=radii,
         face_offsets=offs, faces=faces, vert_offsets=vert_offsets, verts=verts,
         face_part=face_part, chunk_offsets=chunk_offsets, part_chunks=part_chunks,
-        chunk_vert_offsets=chunk_vert_offsets, chunk_verts=chunk_verts,
+        chunk_vert_offsets=chunk_vert_offsets, chunk_verts=chunk_verts, faces_shared=bool(len(faces) > F),
         bounds=bounds, clips=clips, static_local_to_world=l2w,
         stage=stage if l2w is None else None,
     )

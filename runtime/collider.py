@@ -180,8 +180,8 @@ class PartsBackend:
             pose._skin_all()
         n = K._sphere_contacts(center, radius, pose._points, d.triangles, pose.cull, d.faces,
                                d.chunk_offsets, d.part_chunks, pose.chunk_spheres, pose._ready,
-                               pose._version, pose._lazy(), self.use_parts, s["mark"], pose._stamp, s["tri"],
-                               s["point"], s["normal"], s["depth"], s["bary"])
+                               pose._version, pose._lazy(), self.use_parts, d.faces_shared, s["mark"],
+                               pose._stamp, s["tri"], s["point"], s["normal"], s["depth"], s["bary"])
         return SphereContacts(s["tri"][:n].copy(), s["point"][:n].copy(), s["normal"][:n].copy(),
                               s["depth"][:n].copy(), s["bary"][:n].copy())
 

@@ -419,6 +419,8 @@ def test_overlapping_parts_dedup_and_first_part(query_path):
     parts = read_parts(path)
     shared = np.nonzero(parts.face_count > 1)[0]
     assert parts.face_count.min() >= 1 and parts.face_count.max() >= 3
+    assert col.data.faces_shared  # the contact query dedupes (a dominant-parts asset skips it)
+    assert not load_collider(query_path("creature")).data.faces_shared
     assert len(shared) > 0.1 * len(parts.triangles)
     ref = UsdSkelReference(path).use_clip("walk")
     rng = np.random.default_rng(9)

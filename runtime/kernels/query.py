@@ -355,12 +355,13 @@ def _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n, tri_out
 
 @njit(cache=True)
 def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offsets, part_chunks,
-                     chunk_sph, ready, version, lz, use_parts, mark, stamp, tri_out, point_out,
+                     chunk_sph, ready, version, lz, use_parts, dedup, mark, stamp, tri_out, point_out,
                      normal_out, depth_out, bary_out):
     """Every triangle within ``radius`` of ``center``; returns the count written to the outputs.
 
-    Part spheres, then chunk spheres, then Ericson's closest point. ``mark`` (F,) int64 with
-    ``stamp`` dedupes triangles shared by several parts without clearing."""
+    Part spheres, then chunk spheres, then Ericson's closest point.  With ``dedup`` (some face
+    is in several parts), ``mark`` (F,) int64 with ``stamp`` dedupes them without clearing;
+    without, ``mark`` is not read (a fresh pose's first query would miss the cache on it)."""
     px, py, pz = center[0], center[1], center[2]
     r2 = radius * radius
     tmp = np.empty(6)
@@ -385,9 +386,10 @@ def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offse
                     continue
                 for i in range(chunk_offsets[c], chunk_offsets[c + 1]):
                     f = faces[i]
-                    if mark[f] == stamp:
-                        continue
-                    mark[f] = stamp
+                    if dedup:
+                        if mark[f] == stamp:
+                            continue
+                        mark[f] = stamp
                     ia, ib, ic = triangles[f, 0], triangles[f, 1], triangles[f, 2]
                     if _box_gap2(px, py, pz, points, ia, ib, ic) > r2:  # its box is out of reach
                         continue
