@@ -364,6 +364,7 @@ def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offse
     without, ``mark`` is not read (a fresh pose's first query would miss the cache on it)."""
     px, py, pz = center[0], center[1], center[2]
     r2 = radius * radius
+    r2_box = r2 * (1.0 + 1e-9)  # the box test's reach, padded: rounding never culls a contact
     tmp = np.empty(6)
     n = 0
     if use_parts:
@@ -391,7 +392,7 @@ def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offse
                             continue
                         mark[f] = stamp
                     ia, ib, ic = triangles[f, 0], triangles[f, 1], triangles[f, 2]
-                    if _box_gap2(px, py, pz, points, ia, ib, ic) > r2:  # its box is out of reach
+                    if _box_gap2(px, py, pz, points, ia, ib, ic) > r2_box:  # its box is out of reach
                         continue
                     _closest_on_triangle(px, py, pz, points, ia, ib, ic, tmp)
                     dx, dy, dz = px - tmp[0], py - tmp[1], pz - tmp[2]
