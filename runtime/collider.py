@@ -157,31 +157,34 @@ class PartsBackend:
         tri = np.empty(R, dtype=np.int64)
         part = np.empty(R, dtype=np.int64)
         bary = np.empty((R, 3))
-        if R > PARALLEL_RAYS or not self.use_parts:
+        if not self.use_parts:
             pose._skin_all()
+            K._raycast_all(origins, directions, max_distance, pose._points, d.triangles, dist, tri, bary)
+            part = np.where(tri >= 0, d.face_part[np.maximum(tri, 0)], -1)
+            return pose._ray_hits(origins, directions, dist, tri, part, bary)
         if R > PARALLEL_RAYS:
+            pose._skin_all()
+            pose._all_chunks()
             kern = K._raycast_parallel
-            if self.use_parts:
-                pose._all_chunks()
         else:
             kern = K._raycast
         kern(origins, directions, max_distance, pose._points, d.triangles, pose.cull, d.faces,
              d.chunk_offsets, d.part_chunks, pose.chunk_spheres, pose._ready, pose._version,
-             pose._lazy(), self.use_parts, dist, tri, part, bary)
-        if not self.use_parts:
-            part = np.where(tri >= 0, d.face_part[np.maximum(tri, 0)], -1)
+             pose._lazy(), dist, tri, part, bary)
         return pose._ray_hits(origins, directions, dist, tri, part, bary)
 
     def sphere_contacts(self, pose, center, radius):
         d = pose._data
         s = pose._scratch()
-        pose._stamp += 1
-        if not self.use_parts:
+        out = s["tri"], s["point"], s["normal"], s["depth"], s["bary"]
+        if self.use_parts:
+            pose._stamp += 1
+            n = K._sphere_contacts(center, radius, pose._points, d.triangles, pose.cull, d.faces,
+                                   d.chunk_offsets, d.part_chunks, pose.chunk_spheres, pose._ready,
+                                   pose._version, pose._lazy(), d.faces_shared, s["mark"], pose._stamp, *out)
+        else:
             pose._skin_all()
-        n = K._sphere_contacts(center, radius, pose._points, d.triangles, pose.cull, d.faces,
-                               d.chunk_offsets, d.part_chunks, pose.chunk_spheres, pose._ready,
-                               pose._version, pose._lazy(), self.use_parts, d.faces_shared, s["mark"],
-                               pose._stamp, s["tri"], s["point"], s["normal"], s["depth"], s["bary"])
+            n = K._sphere_contacts_all(center, radius, pose._points, d.triangles, *out)
         return SphereContacts(s["tri"][:n].copy(), s["point"][:n].copy(), s["normal"][:n].copy(),
                               s["depth"][:n].copy(), s["bary"][:n].copy())
 

@@ -15,5 +15,5 @@ package compiles nothing.
 """
 
 from .query import (_all_chunk_spheres, _closest_on_triangle, _face_normals, _hit_fill,  # noqa: F401
-                    _raycast, _raycast_parallel, _ready_faces, _sphere_contacts, _surface_frame,
-                    _surface_points)
+                    _raycast, _raycast_all, _raycast_parallel, _ready_faces, _sphere_contacts,
+                    _sphere_contacts_all, _surface_frame, _surface_points)

@@ -127,7 +127,7 @@ def _ray_enters(ox, oy, oz, dx, dy, dz, cx, cy, cz, rad, best):
 
 @njit(cache=True)
 def _ray_one(r, origins, directions, max_distance, points, triangles, cull, faces, chunk_offsets,
-             part_chunks, chunk_sph, ready, version, lz, use_parts, distance, triangle, part, bary):
+             part_chunks, chunk_sph, ready, version, lz, distance, triangle, part, bary):
     ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
     dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
     best = max_distance
@@ -135,37 +135,32 @@ def _ray_one(r, origins, directions, max_distance, points, triangles, cull, face
     bp = -1
     bu = 0.0
     bv = 0.0
-    if use_parts:
-        for p in range(cull.shape[0]):
-            if not _ray_enters(ox, oy, oz, dx, dy, dz, cull[p, 0], cull[p, 1], cull[p, 2], cull[p, 3], best):
+    for p in range(cull.shape[0]):
+        if not _ray_enters(ox, oy, oz, dx, dy, dz, cull[p, 0], cull[p, 1], cull[p, 2], cull[p, 3], best):
+            continue
+        if ready[p] != version:
+            _prepare_part(p, version, lz, points, part_chunks, chunk_sph)
+            ready[p] = version
+        for c in range(part_chunks[p], part_chunks[p + 1]):
+            if not _ray_enters(ox, oy, oz, dx, dy, dz, chunk_sph[c, 0], chunk_sph[c, 1],
+                               chunk_sph[c, 2], chunk_sph[c, 3], best):
                 continue
-            if ready[p] != version:
-                _prepare_part(p, version, lz, points, part_chunks, chunk_sph)
-                ready[p] = version
-            for c in range(part_chunks[p], part_chunks[p + 1]):
-                if not _ray_enters(ox, oy, oz, dx, dy, dz, chunk_sph[c, 0], chunk_sph[c, 1],
-                                   chunk_sph[c, 2], chunk_sph[c, 3], best):
-                    continue
-                for i in range(chunk_offsets[c], chunk_offsets[c + 1]):
-                    f = faces[i]
-                    t, u, v = _mt(ox, oy, oz, dx, dy, dz,
-                                  np.float64(points[triangles[f, 0], 0]), np.float64(points[triangles[f, 0], 1]),
-                                  np.float64(points[triangles[f, 0], 2]), np.float64(points[triangles[f, 1], 0]),
-                                  np.float64(points[triangles[f, 1], 1]), np.float64(points[triangles[f, 1], 2]),
-                                  np.float64(points[triangles[f, 2], 0]), np.float64(points[triangles[f, 2], 1]),
-                                  np.float64(points[triangles[f, 2], 2]))
-                    if t <= best and t < np.inf and (t < best or bf < 0 or f < bf or (f == bf and p < bp)):
-                        best, bf, bp, bu, bv = t, f, p, u, v
-    else:
-        for f in range(triangles.shape[0]):
-            t, u, v = _mt(ox, oy, oz, dx, dy, dz,
-                                  np.float64(points[triangles[f, 0], 0]), np.float64(points[triangles[f, 0], 1]),
-                                  np.float64(points[triangles[f, 0], 2]), np.float64(points[triangles[f, 1], 0]),
-                                  np.float64(points[triangles[f, 1], 1]), np.float64(points[triangles[f, 1], 2]),
-                                  np.float64(points[triangles[f, 2], 0]), np.float64(points[triangles[f, 2], 1]),
-                                  np.float64(points[triangles[f, 2], 2]))
-            if t <= best and t < np.inf and (t < best or bf < 0 or f < bf):
-                best, bf, bu, bv = t, f, u, v
+            for i in range(chunk_offsets[c], chunk_offsets[c + 1]):
+                f = faces[i]
+                t, u, v = _mt(ox, oy, oz, dx, dy, dz,
+                              np.float64(points[triangles[f, 0], 0]), np.float64(points[triangles[f, 0], 1]),
+                              np.float64(points[triangles[f, 0], 2]), np.float64(points[triangles[f, 1], 0]),
+                              np.float64(points[triangles[f, 1], 1]), np.float64(points[triangles[f, 1], 2]),
+                              np.float64(points[triangles[f, 2], 0]), np.float64(points[triangles[f, 2], 1]),
+                              np.float64(points[triangles[f, 2], 2]))
+                if t <= best and t < np.inf and (t < best or bf < 0 or f < bf or (f == bf and p < bp)):
+                    best, bf, bp, bu, bv = t, f, p, u, v
+    _ray_store(r, best, bf, bp, bu, bv, distance, triangle, part, bary)
+
+
+@njit(cache=True, inline="always")
+def _ray_store(r, best, bf, bp, bu, bv, distance, triangle, part, bary):
+    """Write ray ``r``'s nearest hit (triangle ``bf`` < 0: a miss)."""
     if bf < 0:
         distance[r] = np.inf
         triangle[r] = -1
@@ -184,24 +179,49 @@ def _ray_one(r, origins, directions, max_distance, points, triangles, cull, face
 
 @njit(cache=True)
 def _raycast(origins, directions, max_distance, points, triangles, cull, faces, chunk_offsets,
-             part_chunks, chunk_sph, ready, version, lz, use_parts, distance, triangle, part, bary):
+             part_chunks, chunk_sph, ready, version, lz, distance, triangle, part, bary):
     """Nearest hit per ray (serial; the wrapper picks this for few rays). Part spheres, then
     chunk spheres (computed on first use at this pose), then Möller-Trumbore."""
     for r in range(origins.shape[0]):
         _ray_one(r, origins, directions, max_distance, points, triangles, cull, faces,
-                 chunk_offsets, part_chunks, chunk_sph, ready, version, lz, use_parts, distance,
+                 chunk_offsets, part_chunks, chunk_sph, ready, version, lz, distance,
                  triangle, part, bary)
 
 
 @njit(cache=True, parallel=True)
 def _raycast_parallel(origins, directions, max_distance, points, triangles, cull, faces,
-                      chunk_offsets, part_chunks, chunk_sph, ready, version, lz, use_parts, distance,
+                      chunk_offsets, part_chunks, chunk_sph, ready, version, lz, distance,
                       triangle, part, bary):
     """Nearest hit per ray, rays in parallel (every part's chunk spheres must be ready)."""
     for r in prange(origins.shape[0]):
         _ray_one(r, origins, directions, max_distance, points, triangles, cull, faces,
-                 chunk_offsets, part_chunks, chunk_sph, ready, version, lz, use_parts, distance,
+                 chunk_offsets, part_chunks, chunk_sph, ready, version, lz, distance,
                  triangle, part, bary)
+
+
+@njit(cache=True)
+def _raycast_all(origins, directions, max_distance, points, triangles, distance, triangle, bary):
+    """Nearest hit per ray over every triangle, no culling: the brute-force backend (the
+    reference the culled kernels are tested against).  A kernel of its own, so game code, which
+    never calls it, never compiles it; ``part`` is left to the caller."""
+    part = np.empty(origins.shape[0], dtype=np.int64)
+    for r in range(origins.shape[0]):
+        ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
+        dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
+        best = max_distance
+        bf = -1
+        bu = 0.0
+        bv = 0.0
+        for f in range(triangles.shape[0]):
+            t, u, v = _mt(ox, oy, oz, dx, dy, dz,
+                          np.float64(points[triangles[f, 0], 0]), np.float64(points[triangles[f, 0], 1]),
+                          np.float64(points[triangles[f, 0], 2]), np.float64(points[triangles[f, 1], 0]),
+                          np.float64(points[triangles[f, 1], 1]), np.float64(points[triangles[f, 1], 2]),
+                          np.float64(points[triangles[f, 2], 0]), np.float64(points[triangles[f, 2], 1]),
+                          np.float64(points[triangles[f, 2], 2]))
+            if t <= best and t < np.inf and (t < best or bf < 0 or f < bf):
+                best, bf, bu, bv = t, f, u, v
+        _ray_store(r, best, bf, -1, bu, bv, distance, triangle, part, bary)
 
 
 # -- sphere contacts ---------------------------------------------------------------------------
@@ -355,7 +375,7 @@ def _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n, tri_out
 
 @njit(cache=True)
 def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offsets, part_chunks,
-                     chunk_sph, ready, version, lz, use_parts, dedup, mark, stamp, tri_out, point_out,
+                     chunk_sph, ready, version, lz, dedup, mark, stamp, tri_out, point_out,
                      normal_out, depth_out, bary_out):
     """Every triangle within ``radius`` of ``center``; returns the count written to the outputs.
 
@@ -366,49 +386,59 @@ def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offse
     r2 = radius * radius
     r2_box = r2 * (1.0 + 1e-9)  # the box test's reach, padded: rounding never culls a contact
     tmp = np.empty(6)
-    n = 0
-    if use_parts:
-        for p in range(cull.shape[0]):
-            dx = cull[p, 0] - px
-            dy = cull[p, 1] - py
-            dz = cull[p, 2] - pz
-            rr = cull[p, 3] + radius
+    n = np.int64(0)  # not a literal 0: _write_contact then compiles once, not twice
+    for p in range(cull.shape[0]):
+        dx = cull[p, 0] - px
+        dy = cull[p, 1] - py
+        dz = cull[p, 2] - pz
+        rr = cull[p, 3] + radius
+        if dx * dx + dy * dy + dz * dz > rr * rr:
+            continue
+        if ready[p] != version:
+            _prepare_part(p, version, lz, points, part_chunks, chunk_sph)
+            ready[p] = version
+        for c in range(part_chunks[p], part_chunks[p + 1]):
+            dx = chunk_sph[c, 0] - px
+            dy = chunk_sph[c, 1] - py
+            dz = chunk_sph[c, 2] - pz
+            rr = chunk_sph[c, 3] + radius
             if dx * dx + dy * dy + dz * dz > rr * rr:
                 continue
-            if ready[p] != version:
-                _prepare_part(p, version, lz, points, part_chunks, chunk_sph)
-                ready[p] = version
-            for c in range(part_chunks[p], part_chunks[p + 1]):
-                dx = chunk_sph[c, 0] - px
-                dy = chunk_sph[c, 1] - py
-                dz = chunk_sph[c, 2] - pz
-                rr = chunk_sph[c, 3] + radius
-                if dx * dx + dy * dy + dz * dz > rr * rr:
-                    continue
-                for i in range(chunk_offsets[c], chunk_offsets[c + 1]):
-                    f = faces[i]
-                    if dedup:
-                        if mark[f] == stamp:
-                            continue
-                        mark[f] = stamp
-                    ia, ib, ic = triangles[f, 0], triangles[f, 1], triangles[f, 2]
-                    if _box_gap2(px, py, pz, points, ia, ib, ic) > r2_box:  # its box is out of reach
+            for i in range(chunk_offsets[c], chunk_offsets[c + 1]):
+                f = faces[i]
+                if dedup:
+                    if mark[f] == stamp:
                         continue
-                    _closest_on_triangle(px, py, pz, points, ia, ib, ic, tmp)
-                    dx, dy, dz = px - tmp[0], py - tmp[1], pz - tmp[2]
-                    d2 = dx * dx + dy * dy + dz * dz
-                    if d2 <= r2:
-                        n = _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n,
-                                           tri_out, point_out, normal_out, depth_out, bary_out)
-    else:
-        for f in range(triangles.shape[0]):
-            _closest_on_triangle(px, py, pz, points, triangles[f, 0], triangles[f, 1],
-                                 triangles[f, 2], tmp)
-            dx, dy, dz = px - tmp[0], py - tmp[1], pz - tmp[2]
-            d2 = dx * dx + dy * dy + dz * dz
-            if d2 <= r2:
-                n = _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n, tri_out,
-                                   point_out, normal_out, depth_out, bary_out)
+                    mark[f] = stamp
+                ia, ib, ic = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+                if _box_gap2(px, py, pz, points, ia, ib, ic) > r2_box:  # its box is out of reach
+                    continue
+                _closest_on_triangle(px, py, pz, points, ia, ib, ic, tmp)
+                dx, dy, dz = px - tmp[0], py - tmp[1], pz - tmp[2]
+                d2 = dx * dx + dy * dy + dz * dz
+                if d2 <= r2:
+                    n = _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n,
+                                       tri_out, point_out, normal_out, depth_out, bary_out)
+    return n
+
+
+@njit(cache=True)
+def _sphere_contacts_all(center, radius, points, triangles, tri_out, point_out, normal_out, depth_out,
+                         bary_out):
+    """:func:`_sphere_contacts` over every triangle, no culling: the brute-force backend (the
+    reference).  A kernel of its own, so game code never compiles a second copy of the inlined
+    closest-point routine."""
+    px, py, pz = center[0], center[1], center[2]
+    r2 = radius * radius
+    tmp = np.empty(6)
+    n = 0
+    for f in range(triangles.shape[0]):
+        _closest_on_triangle(px, py, pz, points, triangles[f, 0], triangles[f, 1], triangles[f, 2], tmp)
+        dx, dy, dz = px - tmp[0], py - tmp[1], pz - tmp[2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 <= r2:
+            n = _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n, tri_out,
+                               point_out, normal_out, depth_out, bary_out)
     return n
 
 
