@@ -67,6 +67,16 @@ def _mt(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, cx, cy, cz):
     return t, u, v
 
 
+@njit(cache=True, inline="always")
+def _mt_face(ox, oy, oz, dx, dy, dz, points, triangles, f):
+    """:func:`_mt` on triangle ``f`` of the posed ``points`` (its corners read as float64)."""
+    a, b, c = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+    return _mt(ox, oy, oz, dx, dy, dz,
+               np.float64(points[a, 0]), np.float64(points[a, 1]), np.float64(points[a, 2]),
+               np.float64(points[b, 0]), np.float64(points[b, 1]), np.float64(points[b, 2]),
+               np.float64(points[c, 0]), np.float64(points[c, 1]), np.float64(points[c, 2]))
+
+
 @njit(cache=True)
 def _chunk_spheres(p, points, chunk_vert_offsets, chunk_verts, part_chunks, chunk_sph):
     """Bounding spheres of part ``p``'s chunks (a few faces each) on the posed points:
@@ -147,12 +157,7 @@ def _ray_one(r, origins, directions, max_distance, points, triangles, cull, face
                 continue
             for i in range(chunk_offsets[c], chunk_offsets[c + 1]):
                 f = faces[i]
-                t, u, v = _mt(ox, oy, oz, dx, dy, dz,
-                              np.float64(points[triangles[f, 0], 0]), np.float64(points[triangles[f, 0], 1]),
-                              np.float64(points[triangles[f, 0], 2]), np.float64(points[triangles[f, 1], 0]),
-                              np.float64(points[triangles[f, 1], 1]), np.float64(points[triangles[f, 1], 2]),
-                              np.float64(points[triangles[f, 2], 0]), np.float64(points[triangles[f, 2], 1]),
-                              np.float64(points[triangles[f, 2], 2]))
+                t, u, v = _mt_face(ox, oy, oz, dx, dy, dz, points, triangles, f)
                 if t <= best and t < np.inf and (t < best or bf < 0 or f < bf or (f == bf and p < bp)):
                     best, bf, bp, bu, bv = t, f, p, u, v
     _ray_store(r, best, bf, bp, bu, bv, distance, triangle, part, bary)
@@ -213,12 +218,7 @@ def _raycast_all(origins, directions, max_distance, points, triangles, distance,
         bu = 0.0
         bv = 0.0
         for f in range(triangles.shape[0]):
-            t, u, v = _mt(ox, oy, oz, dx, dy, dz,
-                          np.float64(points[triangles[f, 0], 0]), np.float64(points[triangles[f, 0], 1]),
-                          np.float64(points[triangles[f, 0], 2]), np.float64(points[triangles[f, 1], 0]),
-                          np.float64(points[triangles[f, 1], 1]), np.float64(points[triangles[f, 1], 2]),
-                          np.float64(points[triangles[f, 2], 0]), np.float64(points[triangles[f, 2], 1]),
-                          np.float64(points[triangles[f, 2], 2]))
+            t, u, v = _mt_face(ox, oy, oz, dx, dy, dz, points, triangles, f)
             if t <= best and t < np.inf and (t < best or bf < 0 or f < bf):
                 best, bf, bu, bv = t, f, u, v
         _ray_store(r, best, bf, -1, bu, bv, distance, triangle, part, bary)
@@ -319,6 +319,16 @@ def _closest_on_triangle(px, py, pz, points, ia, ib, ic, out):
 
 
 @njit(cache=True, inline="always")
+def _apart(spheres, k, px, py, pz, radius):
+    """Is sphere ``k`` of ``spheres`` (n, 4) beyond ``radius`` of ``(px, py, pz)``?"""
+    dx = spheres[k, 0] - px
+    dy = spheres[k, 1] - py
+    dz = spheres[k, 2] - pz
+    rr = spheres[k, 3] + radius
+    return dx * dx + dy * dy + dz * dz > rr * rr
+
+
+@njit(cache=True, inline="always")
 def _box_gap2(px, py, pz, points, ia, ib, ic):
     """Squared distance from ``(px, py, pz)`` to the bounding box of triangle (ia, ib, ic): a
     lower bound of the squared distance to the triangle, so a face whose box is beyond the
@@ -388,21 +398,13 @@ def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offse
     tmp = np.empty(6)
     n = np.int64(0)  # not a literal 0: _write_contact then compiles once, not twice
     for p in range(cull.shape[0]):
-        dx = cull[p, 0] - px
-        dy = cull[p, 1] - py
-        dz = cull[p, 2] - pz
-        rr = cull[p, 3] + radius
-        if dx * dx + dy * dy + dz * dz > rr * rr:
+        if _apart(cull, p, px, py, pz, radius):
             continue
         if ready[p] != version:
             _prepare_part(p, version, lz, points, part_chunks, chunk_sph)
             ready[p] = version
         for c in range(part_chunks[p], part_chunks[p + 1]):
-            dx = chunk_sph[c, 0] - px
-            dy = chunk_sph[c, 1] - py
-            dz = chunk_sph[c, 2] - pz
-            rr = chunk_sph[c, 3] + radius
-            if dx * dx + dy * dy + dz * dz > rr * rr:
+            if _apart(chunk_sph, c, px, py, pz, radius):
                 continue
             for i in range(chunk_offsets[c], chunk_offsets[c + 1]):
                 f = faces[i]
