@@ -349,9 +349,12 @@ def _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch):
                     reason = f"timed out after {timeout:g} s"
                     os.kill(pid, signal.SIGKILL)
                     break
+                if not watch:
+                    continue
                 seen = _progress(pid)
-                if seen is None or seen[0] != "S" or seen[1] != still[0]:
-                    still = (None if seen is None or seen[0] != "S" else seen[1], time.monotonic())
+                asleep = seen is not None and seen[0] == "S"
+                if not asleep or seen[1] != still[0]:
+                    still = (seen[1] if asleep else None, time.monotonic())
                 elif time.monotonic() - still[1] >= STALL_SECONDS:  # asleep, no CPU: deadlocked
                     os.kill(pid, signal.SIGKILL)
                     os.waitpid(pid, 0)

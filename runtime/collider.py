@@ -148,21 +148,11 @@ class PartsBackend:
     """Part spheres first, then exact tests on the triangles of the parts they pass."""
 
     name = "parts"
-    use_parts = True
 
     def raycast(self, pose, origins, directions, max_distance):
         d = pose._data
-        R = len(origins)
-        dist = np.empty(R)
-        tri = np.empty(R, dtype=np.int64)
-        part = np.empty(R, dtype=np.int64)
-        bary = np.empty((R, 3))
-        if not self.use_parts:
-            pose._skin_all()
-            K._raycast_all(origins, directions, max_distance, pose._points, d.triangles, dist, tri, bary)
-            part = np.where(tri >= 0, d.face_part[np.maximum(tri, 0)], -1)
-            return pose._ray_hits(origins, directions, dist, tri, part, bary)
-        if R > PARALLEL_RAYS:
+        dist, tri, part, bary = _ray_buffers(len(origins))
+        if len(origins) > PARALLEL_RAYS:
             pose._skin_all()
             pose._all_chunks()
             kern = K._raycast_parallel
@@ -176,24 +166,48 @@ class PartsBackend:
     def sphere_contacts(self, pose, center, radius):
         d = pose._data
         s = pose._scratch()
-        out = s["tri"], s["point"], s["normal"], s["depth"], s["bary"]
-        if self.use_parts:
-            pose._stamp += 1
-            n = K._sphere_contacts(center, radius, pose._points, d.triangles, pose.cull, d.faces,
-                                   d.chunk_offsets, d.part_chunks, pose.chunk_spheres, pose._ready,
-                                   pose._version, pose._lazy(), d.faces_shared, s["mark"], pose._stamp, *out)
-        else:
-            pose._skin_all()
-            n = K._sphere_contacts_all(center, radius, pose._points, d.triangles, *out)
-        return SphereContacts(s["tri"][:n].copy(), s["point"][:n].copy(), s["normal"][:n].copy(),
-                              s["depth"][:n].copy(), s["bary"][:n].copy())
+        pose._stamp += 1
+        n = K._sphere_contacts(center, radius, pose._points, d.triangles, pose.cull, d.faces,
+                               d.chunk_offsets, d.part_chunks, pose.chunk_spheres, pose._ready,
+                               pose._version, pose._lazy(), d.faces_shared, s["mark"], pose._stamp,
+                               *_contact_buffers(s))
+        return _contacts(s, n)
 
 
-class BruteForceBackend(PartsBackend):
-    """Every triangle, no culling: the reference the culled backend must always agree with."""
+class BruteForceBackend:
+    """Every triangle, no culling: the reference the culled backend must always agree with
+    (kernels of their own: game code never compiles them)."""
 
     name = "brute"
-    use_parts = False
+
+    def raycast(self, pose, origins, directions, max_distance):
+        d = pose._data
+        dist, tri, part, bary = _ray_buffers(len(origins))
+        pose._skin_all()
+        K._raycast_all(origins, directions, max_distance, pose._points, d.triangles, dist, tri, part, bary)
+        part = np.where(tri >= 0, d.face_part[np.maximum(tri, 0)], -1)
+        return pose._ray_hits(origins, directions, dist, tri, part, bary)
+
+    def sphere_contacts(self, pose, center, radius):
+        s = pose._scratch()
+        pose._skin_all()
+        return _contacts(s, K._sphere_contacts_all(center, radius, pose._points, pose._data.triangles,
+                                                   *_contact_buffers(s)))
+
+
+def _ray_buffers(R):
+    """(distance (R,), triangle (R,), part (R,), barycentric (R, 3)) for a ray kernel to fill."""
+    return np.empty(R), np.empty(R, dtype=np.int64), np.empty(R, dtype=np.int64), np.empty((R, 3))
+
+
+def _contact_buffers(s):
+    return s["tri"], s["point"], s["normal"], s["depth"], s["bary"]
+
+
+def _contacts(s, n):
+    """The first ``n`` contacts a kernel wrote into the pose's scratch ``s``, copied out."""
+    return SphereContacts(s["tri"][:n].copy(), s["point"][:n].copy(), s["normal"][:n].copy(),
+                          s["depth"][:n].copy(), s["bary"][:n].copy())
 
 
 class TrimeshBackend:

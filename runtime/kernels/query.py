@@ -205,11 +205,11 @@ def _raycast_parallel(origins, directions, max_distance, points, triangles, cull
 
 
 @njit(cache=True)
-def _raycast_all(origins, directions, max_distance, points, triangles, distance, triangle, bary):
+def _raycast_all(origins, directions, max_distance, points, triangles, distance, triangle, part, bary):
     """Nearest hit per ray over every triangle, no culling: the brute-force backend (the
     reference the culled kernels are tested against).  A kernel of its own, so game code, which
-    never calls it, never compiles it; ``part`` is left to the caller."""
-    part = np.empty(origins.shape[0], dtype=np.int64)
+    never calls it, never compiles it; ``part`` is written -1 (the caller maps triangles to
+    their first part)."""
     for r in range(origins.shape[0]):
         ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
         dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
@@ -383,6 +383,20 @@ def _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n, tri_out
     return n + 1
 
 
+@njit(cache=True, inline="always")
+def _face_contact(f, ia, ib, ic, px, py, pz, radius, r2, points, triangles, tmp, n, tri_out, point_out,
+                  normal_out, depth_out, bary_out):
+    """Test triangle ``f`` (corners ia, ib, ic) against the sphere: record it as contact ``n``
+    when its closest point (Ericson's, into ``tmp``) is within the radius; returns the count."""
+    _closest_on_triangle(px, py, pz, points, ia, ib, ic, tmp)
+    dx, dy, dz = px - tmp[0], py - tmp[1], pz - tmp[2]
+    d2 = dx * dx + dy * dy + dz * dz
+    if d2 <= r2:
+        n = _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n, tri_out, point_out,
+                           normal_out, depth_out, bary_out)
+    return n
+
+
 @njit(cache=True)
 def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offsets, part_chunks,
                      chunk_sph, ready, version, lz, dedup, mark, stamp, tri_out, point_out,
@@ -415,12 +429,8 @@ def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offse
                 ia, ib, ic = triangles[f, 0], triangles[f, 1], triangles[f, 2]
                 if _box_gap2(px, py, pz, points, ia, ib, ic) > r2_box:  # its box is out of reach
                     continue
-                _closest_on_triangle(px, py, pz, points, ia, ib, ic, tmp)
-                dx, dy, dz = px - tmp[0], py - tmp[1], pz - tmp[2]
-                d2 = dx * dx + dy * dy + dz * dz
-                if d2 <= r2:
-                    n = _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n,
-                                       tri_out, point_out, normal_out, depth_out, bary_out)
+                n = _face_contact(f, ia, ib, ic, px, py, pz, radius, r2, points, triangles, tmp, n,
+                                  tri_out, point_out, normal_out, depth_out, bary_out)
     return n
 
 
@@ -433,14 +443,10 @@ def _sphere_contacts_all(center, radius, points, triangles, tri_out, point_out, 
     px, py, pz = center[0], center[1], center[2]
     r2 = radius * radius
     tmp = np.empty(6)
-    n = 0
+    n = np.int64(0)
     for f in range(triangles.shape[0]):
-        _closest_on_triangle(px, py, pz, points, triangles[f, 0], triangles[f, 1], triangles[f, 2], tmp)
-        dx, dy, dz = px - tmp[0], py - tmp[1], pz - tmp[2]
-        d2 = dx * dx + dy * dy + dz * dz
-        if d2 <= r2:
-            n = _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n, tri_out,
-                               point_out, normal_out, depth_out, bary_out)
+        n = _face_contact(f, triangles[f, 0], triangles[f, 1], triangles[f, 2], px, py, pz, radius, r2,
+                          points, triangles, tmp, n, tri_out, point_out, normal_out, depth_out, bary_out)
     return n
 
 
