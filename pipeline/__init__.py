@@ -4,4 +4,4 @@ The stages are chained in :func:`pipeline.run.import_asset`; readers are registe
 extension in :mod:`pipeline.readers`.
 """
 
-__version__ = "0.1.0"
+from colossus._version import __version__  # noqa: F401  (one version, written once)

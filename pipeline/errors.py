@@ -6,7 +6,7 @@ Library code raises these; only the command line turns them into messages and ex
 
 from __future__ import annotations
 
-from runtime.errors import ColossusError, one_line
+from colossus.runtime.errors import ColossusError, one_line
 
 __all__ = ["ColossusError", "one_line", "InputError", "OutputError", "UsageError"]
 

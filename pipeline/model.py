@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from runtime.schema import parents_first
+from colossus.runtime.schema import parents_first
 
 
 def _check(cond: bool, what: str, expected, actual) -> None:

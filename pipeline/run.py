@@ -111,7 +111,7 @@ class ImportResult:
 def proxy_provenance(report) -> dict:
     """The ``customData["colossus"]["proxy"]`` dictionary of a simplified proxy (key paths
     :data:`runtime.schema.PROXY_SOURCE_FACES`, :data:`~runtime.schema.PROXY_MAX_DEVIATION`, ...)."""
-    from runtime import schema
+    from colossus.runtime import schema
 
     c = report.counts
     w = c["worst"]

@@ -17,7 +17,7 @@ def samples_meta():
 def imported(tmp_path_factory):
     """Import each (sample, format, parts mode) once per session: returns a function giving
     (result, out_path); ``parts="any"`` is ``colossus import --parts any`` (overlapping parts)."""
-    from pipeline.run import ImportSettings, import_asset
+    from colossus.pipeline.run import ImportSettings, import_asset
 
     cache = {}
     base = tmp_path_factory.mktemp("imported")

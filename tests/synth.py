@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.model import Clip, SkinnedMesh
+from colossus.pipeline.model import Clip, SkinnedMesh
 
 
 def translate(x, y, z):

@@ -29,7 +29,7 @@ class Run:
     reached the file descriptors (capfd), and every warning shown to a user."""
 
     def __init__(self, args, capfd):
-        from pipeline.cli import main
+        from colossus.cli import main
         capfd.readouterr()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -218,8 +218,8 @@ def test_unweighted_vertex_is_error_then_nearest_bone(work, run_import):
 
 def test_allocation_cap(work, monkeypatch):
     """A file may not make the importer allocate beyond its size times a fixed factor."""
-    from pipeline.errors import InputError
-    from pipeline.readers import common, read
+    from colossus.pipeline.errors import InputError
+    from colossus.pipeline.readers import common, read
 
     monkeypatch.setattr(common, "ALLOC_FACTOR", 2)
     monkeypatch.setattr(common, "ALLOC_FLOOR", 0)
@@ -270,7 +270,7 @@ def assert_no_internal_error(proc, out, needle):
     assert_clean_failure(proc, out, needle)
 
 
-COLOSSUS = [sys.executable, "-m", "pipeline.cli"]
+COLOSSUS = [sys.executable, "-m", "colossus"]
 
 
 # ---- native faults: the reader runs in a contained child process ----------------------------
@@ -303,8 +303,8 @@ def test_hanging_reader_times_out(work, run_import, monkeypatch):
 def test_contained_call_round_trip():
     """The child's result, its exception (our InputError with its fields), and its warnings come
     back exactly; a runaway allocation hits the child's memory cap, not the machine."""
-    from pipeline.errors import InputError
-    from pipeline.isolation import available, contained
+    from colossus.pipeline.errors import InputError
+    from colossus.pipeline.isolation import available, contained
     if not available():
         pytest.skip("no os.fork here")
     arr = contained(np.arange, 1000, dtype=np.float32)
@@ -330,7 +330,7 @@ def test_contained_call_round_trip():
 def test_contained_call_quiet_and_fallback(capfd, monkeypatch):
     """What the child prints natively (fds 1 and 2) stays out of the command's output; where no
     process can be forked (EAGAIN), the call runs in this process instead of failing."""
-    from pipeline.isolation import available, contained
+    from colossus.pipeline.isolation import available, contained
     if not available():
         pytest.skip("no os.fork here")
 
@@ -355,8 +355,8 @@ def test_contained_child_deadlocked_at_the_fork_is_forked_again(monkeypatch):
     killed after STALL_SECONDS asleep without CPU and forked again, once the lock is free."""
     import threading
 
-    from pipeline import isolation
-    from pipeline.isolation import ChildFailed, available, contained
+    from colossus.pipeline import isolation
+    from colossus.pipeline.isolation import ChildFailed, available, contained
     if not available() or isolation._progress(os.getpid()) is None:
         pytest.skip("needs os.fork and Linux /proc")
     lock = threading.Lock()
@@ -404,8 +404,8 @@ def _spin(seconds):
 
 def test_reader_isolation_can_be_switched_off(work, monkeypatch):
     """COLOSSUS_ISOLATE=0 reads in-process (the fallback where fork is missing): same result."""
-    from pipeline.isolation import read_isolated
-    from pipeline.readers import read
+    from colossus.pipeline.isolation import read_isolated
+    from colossus.pipeline.readers import read
     monkeypatch.setenv("COLOSSUS_ISOLATE", "0")
     a = read_isolated(SAMPLES / "limb.glb")
     b = read(SAMPLES / "limb.glb")
@@ -503,7 +503,7 @@ def test_long_parser_quote_is_cut(work, run_import):
 def test_one_line_survives_undecodable_usd_errors():
     """usd-core's Tf.ErrorException raises UnicodeDecodeError from str() when the file's bytes
     it quotes are not UTF-8: one_line still gives a line."""
-    from runtime.errors import one_line
+    from colossus.runtime.errors import one_line
 
     class Undecodable(Exception):
         def __str__(self):
@@ -515,7 +515,7 @@ def test_one_line_survives_undecodable_usd_errors():
 # ---- validate on corrupt assets ----------------------------------------------------------------
 @pytest.fixture(scope="module")
 def good_assets(tmp_path_factory):
-    from pipeline.run import import_asset
+    from colossus.pipeline.run import import_asset
     d = tmp_path_factory.mktemp("good")
     out = {}
     for ext in (".usda", ".usdc"):

@@ -20,14 +20,14 @@ COMMANDS = ("import", "validate", "inspect", "render", "play", "bench")
 
 def colossus(*args):
     """``colossus ARGS...`` in process; returns click's Result (exit_code, stdout, stderr)."""
-    from pipeline.cli import main
+    from colossus.cli import main
     return CliRunner().invoke(main, [str(a) for a in args], prog_name="colossus")
 
 
 def entry_point():
     """The installed console script, else ``python -m pipeline.cli``."""
     script = Path(sys.executable).with_name("colossus")
-    return [str(script)] if script.exists() else [sys.executable, "-m", "pipeline.cli"]
+    return [str(script)] if script.exists() else [sys.executable, "-m", "colossus"]
 
 
 def test_help_lists_every_command():

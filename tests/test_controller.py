@@ -12,11 +12,11 @@ import math
 import numpy as np
 import pytest
 
-from runtime import load_collider
-from runtime.controller import (FALLING, HANGING, HOLDING, SLIDING, STANDING, CharacterController,
+from colossus.runtime import load_collider
+from colossus.runtime.controller import (FALLING, HANGING, HOLDING, SLIDING, STANDING, CharacterController,
                                 Intent, carry_point, resolve_push)
-from runtime.controller import _along
-from runtime.script import start_position
+from colossus.runtime.controller import _along
+from colossus.runtime.script import start_position
 from usd_reference import UsdSkelReference
 from test_runtime_naive import (closest_point_on_triangles, inside_closed_mesh, naive_along,
                                 naive_carry, naive_push, naive_raycast)

@@ -27,8 +27,8 @@ def test_corpus_character_certified_for_every_time(rel, tmp_path):
     src = CORPUS / rel
     if not src.is_file():
         pytest.skip(f"corpus file {rel} not present ({CORPUS})")
-    from pipeline.run import import_asset
-    from validators import check_asset
+    from colossus.pipeline.run import import_asset
+    from colossus.validators import check_asset
 
     out = tmp_path / "asset.usda"
     import_asset(str(src), str(out))

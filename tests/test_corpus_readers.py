@@ -20,7 +20,7 @@ import pytest
 from conftest import ROOT
 
 CORPUS = ROOT.parent / "shared" / "corpus"
-COLOSSUS = [sys.executable, "-m", "pipeline.cli"]
+COLOSSUS = [sys.executable, "-m", "colossus"]
 
 
 def corpus_file(rel):
@@ -33,7 +33,7 @@ def corpus_file(rel):
 @pytest.fixture(scope="module")
 def imported(tmp_path_factory):
     """Import a corpus file once per module: ``get(rel, **settings) -> (ImportResult, out path)``."""
-    from pipeline.run import ImportSettings, import_asset
+    from colossus.pipeline.run import ImportSettings, import_asset
 
     cache = {}
     base = tmp_path_factory.mktemp("corpus")
@@ -62,7 +62,7 @@ def _read(result):
 def test_fbx_bones_without_weights_import(imported, rel, vertices_in, skinned):
     """These FBX files have bones with no weights (assimp gives them no buffer): they crashed
     with 'all the input arrays must have same number of dimensions'."""
-    import validators
+    from colossus import validators
 
     res, out = imported(rel)
     rc = _read(res).counts
@@ -114,8 +114,8 @@ def test_write_refuses_what_usd_core_cannot_open(tmp_path):
     """The written file is re-opened before the rename: a framesPerSecond of -1 never lands."""
     from pxr import Sdf
 
-    from pipeline.errors import OutputError
-    from pipeline.stages.write import _check_written
+    from colossus.pipeline.errors import OutputError
+    from colossus.pipeline.stages.write import _check_written
 
     bad = tmp_path / "bad.usda"
     bad.write_text('#usda 1.0\n(\n    defaultPrim = "A"\n    framesPerSecond = -1\n    timeCodesPerSecond = -1\n)\n'
@@ -186,7 +186,7 @@ def test_cesium_man_unnamed_animations_and_light_weights(imported):
 def test_clips_on_a_regular_grid_pass_the_validator(imported, rel, fps):
     """Every clip is sampled on one regular grid holding every source key; the asset passes COL502
     (and the frame proof COL403 on the frames it holds)."""
-    import validators
+    from colossus import validators
 
     res, out = imported(rel)
     m = res.mesh
@@ -205,7 +205,7 @@ def test_off_grid_keys_state_their_error_bound(imported):
     key, is not loose by more than 30 %, and a bound over 1e-3 x size is a warning."""
     from reference import compare
 
-    from pipeline.cli_import import format_summary
+    from colossus.cli.import_ import format_summary
 
     res, out = imported("khronos/Fox.glb", fps=30.0)
     clips = {c["name"]: c for c in _read(res).details["clips"]}
@@ -260,7 +260,7 @@ def _tiny_gltf(path, interpolation, values, times=(0.0, 0.5, 1.0)):
 
 
 def test_step_sampler_holds_each_key_until_the_next(tmp_path):
-    from pipeline.readers import read
+    from colossus.pipeline.readers import read
 
     keys = [[0, 0, 0], [1, 0, 0], [3, 0, 0]]
     m = read(_tiny_gltf(tmp_path / "step.gltf", "STEP", keys))
@@ -273,7 +273,7 @@ def test_step_sampler_holds_each_key_until_the_next(tmp_path):
 
 def test_cubicspline_sampler_is_the_specs_hermite(tmp_path):
     """glTF 2.0 Appendix C: p(u) = (2u^3-3u^2+1) v0 + (u^3-2u^2+u) dt b0 + (-2u^3+3u^2) v1 + (u^3-u^2) dt a1."""
-    from pipeline.readers import read
+    from colossus.pipeline.readers import read
 
     # per key: in-tangent a, value v, out-tangent b
     a = np.array([[0, 0, 0], [2, 0, 0], [0, 0, 0]], float)
@@ -315,8 +315,8 @@ def test_collada_polygons_skin_and_clips_come_from_the_file(imported):
     of the Collada vertex before it; the reader uses the file's <vertex_weights> (Collada vertex
     0 is weighted 1 to the joint `Bone`, node id-bone-3) and the clips' own names and windows
     (`bend` 0.0417..0.625 s, `turn` 0..0.8333 s at 24 fps)."""
-    import validators
-    from pipeline.readers import read
+    from colossus import validators
+    from colossus.pipeline.readers import read
 
     m = read(corpus_file("assimp/library_animation_clips.dae"))
     assert m.joint_names[m.joint_indices[0, 0]] == "id-bone-3" and m.joint_weights[0, 0] == 1.0

@@ -7,7 +7,7 @@ from scipy.spatial import cKDTree
 
 import naive
 from conftest import SAMPLES
-from pipeline.tolerances import model_scale
+from colossus.pipeline.tolerances import model_scale
 from usd_reference import UsdSkelReference
 
 FORMATS = ("glb", "fbx", "usda")
@@ -213,7 +213,7 @@ def test_flipped_sample_comes_out_outward(imported, samples_meta):
 
 @pytest.mark.parametrize("model,ext", [(m, e) for m in MODELS for e in FORMATS] + [("limb_flipped", "glb")])
 def test_imported_assets_pass_every_validator(imported, model, ext):
-    import validators
+    from colossus import validators
 
     _, out = imported(model, ext)
     report = validators.check_asset(str(out))
@@ -224,7 +224,7 @@ def test_imported_assets_pass_every_validator(imported, model, ext):
 def test_provenance_and_metadata(imported):
     from pxr import Usd, UsdGeom
 
-    from pipeline.run import sha256_of
+    from colossus.pipeline.run import sha256_of
     from conftest import SAMPLES
 
     _, out = imported("creature", "fbx")
@@ -250,7 +250,7 @@ def test_several_meshes_merged_or_chosen(tmp_path):
     from pxr import Gf, Sdf, Usd
 
     from conftest import SAMPLES
-    from pipeline.run import ImportSettings, import_asset
+    from colossus.pipeline.run import ImportSettings, import_asset
 
     src = tmp_path / "two_limbs.usda"
     shutil.copy(SAMPLES / "limb.usda", src)

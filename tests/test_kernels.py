@@ -9,11 +9,11 @@ from pxr import Gf, Usd, UsdSkel, Vt
 from scipy.spatial.transform import Rotation
 
 import naive
-from runtime import certify as C
-from runtime.asset import ClipData
-from runtime.kernels import bounds as B
-from runtime.kernels import pose as PK
-from runtime.kernels import skin as SK
+from colossus.runtime import certify as C
+from colossus.runtime.asset import ClipData
+from colossus.runtime.kernels import bounds as B
+from colossus.runtime.kernels import pose as PK
+from colossus.runtime.kernels import skin as SK
 
 
 def _random_skin(rng, n=300, J=6, k=4, F=5):

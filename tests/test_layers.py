@@ -1,32 +1,57 @@
-"""Imports flow one way: ``runtime`` (lowest) <- ``pipeline`` <- ``validators``, the CLI on top.
+"""Imports flow one way through the floors of the one ``colossus`` package:
 
-Every module of the three packages is parsed (``ast``); every import is an edge, lazy ones inside
-functions included.  A library module may import only its own package and the packages below it;
-only command-line modules (``*cli*.py``) may reach across floors.  No two modules may import each
-other, directly or through others (no cycle), whatever their floor.
+    runtime (0) <- pipeline (1) <- validators (2) <- render (3) <- cli, bench (4)
+
+Every module of every floor is parsed (``ast``); every import is an edge, lazy ones inside
+functions included.  A module may import only its own floor and the floors below it (no name is
+exempt: the command line and the benchmarks are floors of their own, on top); ``colossus._version``
+is below everything.  No two modules may import each other, directly or through others (no cycle),
+whatever their floor.  The floors' folders are the repository's top-level folders, installed under
+``colossus`` by ``pyproject.toml``'s ``package-dir``; these tests read that mapping, so the wheel and
+the tests see the same package.
 """
 
 from __future__ import annotations
 
 import ast
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-FLOORS = {"runtime": 0, "pipeline": 1, "validators": 2}
-#: What the game runtime's library modules may import at module level besides the standard library
-#: and ``runtime`` itself (lazy imports of optional backends, e.g. trimesh, are allowed).
+PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
+#: installed package -> repository folder (pyproject's package-dir)
+PACKAGE_DIR = PYPROJECT["tool"]["setuptools"]["package-dir"]
+FLOORS = {"colossus._version": -1, "colossus.runtime": 0, "colossus.pipeline": 1, "colossus.validators": 2,
+          "colossus.render": 3, "colossus.cli": 4, "colossus.bench": 4, "colossus.__main__": 5,
+          "colossus": 5}
+#: What the game runtime's modules may import at module level besides the standard library and
+#: ``colossus.runtime`` itself (lazy imports of optional backends, e.g. trimesh, are allowed).
 RUNTIME_THIRD_PARTY = {"numpy", "numba", "pxr"}
+#: The repository's folders: importing them by their bare names would load a second copy.
+BARE = {folder for pkg, folder in PACKAGE_DIR.items() if pkg != "colossus"}
+
+
+def floor(mod):
+    """The floor of the module ``mod`` (dotted, absolute): its longest prefix in :data:`FLOORS`."""
+    parts = mod.split(".")
+    for k in range(len(parts), 0, -1):
+        f = FLOORS.get(".".join(parts[:k]))
+        if f is not None:
+            return f
+    return None
 
 
 def _modules():
     out = {}
-    for pkg in FLOORS:
-        for f in sorted((ROOT / pkg).rglob("*.py")):
-            rel = f.relative_to(ROOT).with_suffix("")
-            parts = list(rel.parts)
+    for pkg, folder in sorted(PACKAGE_DIR.items()):
+        base = ROOT / folder
+        files = sorted(base.rglob("*.py")) if pkg != "colossus" else sorted(base.glob("*.py"))
+        for f in files:
+            rel = f.relative_to(base).with_suffix("")
+            parts = pkg.split(".") + list(rel.parts)
             if parts[-1] == "__init__":
                 parts = parts[:-1]
             out[".".join(parts)] = f
@@ -64,27 +89,42 @@ def _graph():
         for mod, line, top in _imports(name, path):
             while mod and mod not in mods:
                 mod = mod.rpartition(".")[0]
-            if mod and mod != name and FLOORS.get(mod.split(".")[0]) is not None:
+            if mod and mod != name and floor(mod) is not None:
                 tgt.setdefault(mod, line)
         edges[name] = tgt
     return mods, edges
-
-
-def _is_cli(name):
-    return "cli" in name.rsplit(".", 1)[-1]
 
 
 def test_no_upward_imports():
     mods, edges = _graph()
     bad = []
     for src, tgts in edges.items():
-        if _is_cli(src):
-            continue
-        f_src = FLOORS[src.split(".")[0]]
         for dst, line in tgts.items():
-            if FLOORS[dst.split(".")[0]] > f_src:
+            if floor(dst) > floor(src):
                 bad.append(f"{mods[src].relative_to(ROOT)}:{line} imports {dst} (a higher floor)")
     assert not bad, "upward imports:\n" + "\n".join(bad)
+
+
+def test_no_bare_folder_imports():
+    """``import pipeline`` (the folder's name, not ``colossus.pipeline``) would load a second copy of
+    every module when the repository root is on ``sys.path``: nothing, tests and tools included,
+    imports the folders by their bare names."""
+    files = list(_modules().values()) + sorted((ROOT / "tests").rglob("*.py")) + [ROOT / "tools" / "compile-profile"]
+    bad = []
+    for f in files:
+        for node in ast.walk(ast.parse(f.read_text(), filename=str(f))):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module] if isinstance(node, ast.ImportFrom) and not node.level and node.module else [])
+            bad += [f"{f.relative_to(ROOT)}:{node.lineno} imports {n}" for n in names if n.split(".")[0] in BARE]
+    assert not bad, "imports of a folder's bare name (use colossus.<floor>):\n" + "\n".join(bad)
+
+
+def test_every_package_is_installed():
+    """Every folder with an ``__init__.py`` under a floor is a package the wheel lists (a package
+    left out of ``[tool.setuptools] packages`` would be missing from the wheel only)."""
+    listed = set(PYPROJECT["tool"]["setuptools"]["packages"])
+    found = {m for m, f in _modules().items() if f.name == "__init__.py"}
+    assert found == listed, f"in the tree, not listed: {sorted(found - listed)}; listed, absent: {sorted(listed - found)}"
 
 
 def test_no_import_cycles():
@@ -149,20 +189,21 @@ def test_runtime_needs_only_numpy_numba_pxr():
     mods = _modules()
     bad = []
     for name, path in mods.items():
-        if not name.startswith("runtime") or _is_cli(name) or name.endswith("bench"):
+        if not name.startswith("colossus.runtime"):
             continue
         for mod, line, top in _imports(name, path):
             root = (mod or "").split(".")[0]
-            if not top or root in stdlib or root in RUNTIME_THIRD_PARTY or root in ("runtime", "__future__"):
+            if not top or root in stdlib or root in RUNTIME_THIRD_PARTY or root == "__future__" or (mod or "").startswith("colossus.runtime"):
                 continue
             bad.append(f"{path.relative_to(ROOT)}:{line} imports {mod}")
     assert not bad, "\n".join(bad)
 
 
-@pytest.mark.parametrize("pkg", sorted(FLOORS))
+@pytest.mark.parametrize("pkg", ["colossus.runtime", "colossus.pipeline", "colossus.validators",
+                                 "colossus.render", "colossus.cli", "colossus.bench"])
 def test_graph_sees_every_module(pkg):
     """Guard against a parser that silently finds nothing (the tests above would pass vacuously)."""
     mods, edges = _graph()
-    names = [m for m in mods if m.split(".")[0] == pkg]
+    names = [m for m in mods if m == pkg or m.startswith(pkg + ".")]
     assert len(names) >= 5
     assert sum(len(edges[m]) for m in names) >= 5

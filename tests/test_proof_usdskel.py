@@ -26,7 +26,7 @@ from pxr import Vt
 
 from usd_fixture import open_copy
 from usd_reference import part_distances, tightest
-from validators import check_asset
+from colossus.validators import check_asset
 
 ASSETS = {
     "limb-glb": ("limb", "glb", "dominant"),

@@ -347,7 +347,7 @@ def test_harness_catches_a_time_shift_and_a_unit_error(corpus, tmp_path):
     """A correct asset compares clean; the same asset one frame late, or in the wrong units, does not."""
     from pxr import Sdf, UsdGeom
 
-    from pipeline.run import import_asset
+    from colossus.pipeline.run import import_asset
 
     src = corpus / "realworld" / "usdwg_CesiumMan.usdz"
     good = tmp_path / "good.usda"
@@ -393,7 +393,7 @@ _COMPARED = {}
 
 
 def _compared(corpus, tmp_path_factory, name):
-    from pipeline.run import import_asset
+    from colossus.pipeline.run import import_asset
 
     if name not in _COMPARED:
         src = corpus / name

@@ -20,9 +20,9 @@ from PIL import Image
 
 from conftest import SAMPLES
 from usd_fixture import open_copy
-from validators.cli import validate_cmd
-from validators.cli_inspect import inspect_cmd
-from validators.cli_render import render_cmd
+from colossus.cli.validate import validate_cmd
+from colossus.cli.inspect import inspect_cmd
+from colossus.cli.render import render_cmd
 
 BROKEN_JOINT = "leg_FL_lower"
 
@@ -115,9 +115,9 @@ def test_inspect_unreadable_exit_2(assets, which):
 # ------------------------------------------------------------------------------------ render
 def test_render_consistent_with_the_proof(assets):
     """What the renderer draws red is exactly what the frame proof fails."""
-    from validators import check_asset
-    from validators.render import poses
-    from validators.summary import open_asset
+    from colossus.validators import check_asset
+    from colossus.render.draw import poses
+    from colossus.validators.summary import open_asset
 
     good = open_asset(assets["creature"])
     for c in good.clips:
@@ -185,7 +185,7 @@ def test_render_gif_whole_clip(assets):
 
 
 def test_gif_subsampling_and_size_parsing():
-    from validators.render import gif_times, parse_size
+    from colossus.render.draw import gif_times, parse_size
 
     assert len(gif_times(np.arange(49), 60)) == 49
     t = gif_times(np.arange(200), 60)

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from pxr import Usd, Vt
 
-from runtime import ColliderError, SphereContacts, SurfacePoints, load_collider
-from runtime import kernels as K
-from runtime.collider import PARALLEL_RAYS
+from colossus.runtime import ColliderError, SphereContacts, SurfacePoints, load_collider
+from colossus.runtime import kernels as K
+from colossus.runtime.collider import PARALLEL_RAYS
 from test_runtime_naive import (closest_point_on_triangles, naive_raycast, naive_skin,
                                 naive_sphere_contacts, ray_triangles)
 from usd_reference import UsdSkelReference, read_parts
@@ -64,7 +64,7 @@ def test_load(creature, samples_meta):
 
 
 def test_load_verified(limb_path):
-    from validators import require_passing
+    from colossus.validators import require_passing
     col = load_collider(limb_path, verify=require_passing)  # the validators' error rules, given by the caller
     assert col.clips == ["bend"]
     with pytest.raises(TypeError):
@@ -86,7 +86,7 @@ def test_bad_files(tmp_path, content):
 def test_verify_rejects_broken_asset(tmp_path, limb_path):
     """verify=require_passing raises on an asset the error rules reject; without it it still loads."""
     from usd_fixture import open_copy
-    from validators import require_passing
+    from colossus.validators import require_passing
     stage = open_copy(limb_path)  # never edit the layer the session's colliders share
     mesh = next(p for p in stage.Traverse() if p.GetTypeName() == "Mesh")
     radii = np.asarray(mesh.GetAttribute("colossus:parts:radii").Get()) * 0.3
@@ -642,7 +642,7 @@ def test_a_radius_shrunk_by_a_thousandth_fails_and_usd_agrees(name, imported, tm
     """Shrinking every part radius by 0.1 % of itself fails validation (COL403, or COL407 between
     frames), with the proof's own kernel; usd-core's skinning (UsdSkel.SkinningQuery) agrees that the
     named vertex is outside the shrunk sphere by the reported excess, and inside the written one."""
-    from validators import check_asset
+    from colossus.validators import check_asset
 
     path = imported(name, "glb")[1]
     assert check_asset(path).passed

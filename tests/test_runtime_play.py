@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 from click.testing import CliRunner
 
-from runtime import load_collider
-from runtime.cli import play_cmd
-from runtime.player import simulate
+from colossus.runtime import load_collider
+from colossus.cli.play import play_cmd
+from colossus.runtime.player import simulate
 
 
 def test_player_lands_stands_and_is_carried(imported):
@@ -54,8 +54,8 @@ import json  # noqa: E402
 
 import pytest  # noqa: E402
 
-from runtime.controller import STATES  # noqa: E402
-from runtime.script import CSV_COLUMNS, ScriptError, load_script, parse_script, run_script  # noqa: E402
+from colossus.runtime.controller import STATES  # noqa: E402
+from colossus.runtime.script import CSV_COLUMNS, ScriptError, load_script, parse_script, run_script  # noqa: E402
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "docs" / "play-climb.json"

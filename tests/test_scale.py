@@ -13,8 +13,8 @@ from xml.etree import ElementTree as ET
 import pytest
 from click.testing import CliRunner
 
-from pipeline.batch import output_names
-from pipeline.engine import expand_inputs, local_cluster
+from colossus.pipeline.batch import output_names
+from colossus.pipeline.engine import expand_inputs, local_cluster
 from usd_fixture import open_copy
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,7 +38,7 @@ def _scale_radii(src, dst, factor):
 def lib(tmp_path_factory, imported):
     """Imported samples, copies with shrunk (COL403) and grown (COL404) part radii, a few
     generated 3-clip assets, a corrupt file, in two directories."""
-    from validators.bench import make_library
+    from colossus.bench.validate import make_library
     d = tmp_path_factory.mktemp("scale")
     (d / "b").mkdir()
     for name, ext in (("creature", "glb"), ("limb", "glb"), ("limb_flipped", "glb"), ("creature", "fbx")):
@@ -63,7 +63,7 @@ def cluster():
 
 
 def validate(*args):
-    from validators.cli import validate_cmd
+    from colossus.cli.validate import validate_cmd
     return CliRunner().invoke(validate_cmd, [str(a) for a in args])
 
 
@@ -131,7 +131,7 @@ def test_cluster_gives_the_same_report_as_jobs_1(lib, cluster, reference):
             assert strip_junit_times(r.stdout) == strip_junit_times(reference["junit"])
         else:
             assert r.stdout == reference["text"]
-    from validators.parallel import check_many, comparable
+    from colossus.validators.parallel import check_many, comparable
     res = check_many([lib], scheduler=addr, split_bytes=0, subframes=1)
     assert [Path(p).name for p in res.split] == ["creature-shrunk.usda", "creature-fbx.usda", "creature-glb.usda",
                                                  "asset0000.usda", "asset0001.usda", "asset0002.usda"]
@@ -199,7 +199,7 @@ def test_process_pool_worker_death_retried_once_then_a_finding(crashlib, monkeyp
 
 
 def test_ctrl_c_writes_partial_report_marked_incomplete(lib, tmp_path, monkeypatch):
-    import validators.parallel as par
+    import colossus.validators.parallel as par
     real, seen = par.unit_check, []
 
     def interrupted_on_third(path, kw):
@@ -229,7 +229,7 @@ def test_ctrl_c_writes_partial_report_marked_incomplete(lib, tmp_path, monkeypat
 
 # ------------------------------------------------------------------------------ import
 def import_cli(*args):
-    from pipeline.cli_import import import_cmd
+    from colossus.cli.import_ import import_cmd
     return CliRunner().invoke(import_cmd, [str(a) for a in args])
 
 
@@ -263,14 +263,14 @@ def test_import_many_output_must_be_a_directory(tmp_path):
 def test_unreachable_scheduler_exit_2(lib, monkeypatch):
     needs_dask()
     t0 = time.perf_counter()
-    monkeypatch.setattr("pipeline.engine.CONNECT_TIMEOUT", 2.0)
+    monkeypatch.setattr("colossus.pipeline.engine.CONNECT_TIMEOUT", 2.0)
     r = validate(lib / "limb-glb.usda", "--scheduler", "tcp://127.0.0.1:9")
     assert r.exit_code == 2 and "cannot reach the Dask scheduler" in r.stderr
     assert time.perf_counter() - t0 < 20
 
 
 def test_import_many_ctrl_c_marks_incomplete(tmp_path, monkeypatch):
-    import pipeline.batch as batch
+    import colossus.pipeline.batch as batch
     real = batch._import_unit
 
     def interrupted_on_second(src, out, settings):

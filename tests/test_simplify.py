@@ -19,12 +19,12 @@ from click.testing import CliRunner
 
 import naive
 import synth
-from pipeline.cli import main
-from pipeline.errors import UsageError
-from pipeline.geometry.collapse import apply_collapses, interior_vertices
-from pipeline.geometry.surface_distance import (cover_radius, deviation_bound, nearest_on_candidates, piece_bounds,
+from colossus.cli import main
+from colossus.pipeline.errors import UsageError
+from colossus.pipeline.geometry.collapse import apply_collapses, interior_vertices
+from colossus.pipeline.geometry.surface_distance import (cover_radius, deviation_bound, nearest_on_candidates, piece_bounds,
                                                 sample_distances)
-from pipeline.stages.simplify import _collapses, _shells, deviation, mesh_poses, parse_max_deviation, simplify
+from colossus.pipeline.stages.simplify import _collapses, _shells, deviation, mesh_poses, parse_max_deviation, simplify
 
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = ROOT.parent / "shared" / "corpus"
@@ -191,8 +191,8 @@ def test_parse_max_deviation():
 
 # ------------------------------------------------------------------------------ the stage
 def _bound_tube(around=32, rings=40):
-    from pipeline.stages.bind import bind
-    from pipeline.stages.orient import orient
+    from colossus.pipeline.stages.bind import bind
+    from colossus.pipeline.stages.orient import orient
 
     m = synth.make_tube(around=around, rings=rings, frames=6)
     m, _ = orient(m)
@@ -222,7 +222,7 @@ def test_simplify_tube_reaches_target_keeps_closed_and_does_not_mutate(tube):
     d = deviation(m, p)
     assert abs(d.bound - c["deviation"]) <= 1e-9 + 1e-6 * c["deviation"]
     poses = mesh_poses(m)
-    from runtime.kernels.skin import skin_frames
+    from colossus.runtime.kernels.skin import skin_frames
 
     f = d.worst_pose
     a = skin_frames(m.positions, m.joint_indices, m.joint_weights, poses.mats[[f]])[0]
@@ -254,7 +254,7 @@ def test_max_deviation_stops_the_decimation_within_the_limit():
 def test_bone_boundary_penalty_makes_fewer_collapses_across_bones(tube):
     """The embedding's part steps make collapses across part boundaries wait: fewer accepted
     collapses join vertices of different dominant bones than without the steps."""
-    from pipeline.stages import simplify as S
+    from colossus.pipeline.stages import simplify as S
 
     with_penalty = S.simplify(tube, target_faces=300)[1].counts["bone_crossing_collapses"]
     saved = S.SIMPLIFY_BONE_BOUNDARY
@@ -273,8 +273,8 @@ def test_skin_transfer_keeps_each_shell_to_its_own_skin():
     weights (the tip's small share there), every vertex of the band keeps weight 1 on the tip.
     Closest points over the whole mesh gave body vertices the band's weight 1 (and 3.6x the
     deviation)."""
-    from pipeline.stages.bind import bind
-    from pipeline.stages.orient import orient
+    from colossus.pipeline.stages.bind import bind
+    from colossus.pipeline.stages.orient import orient
 
     m = synth.make_tube(around=32, rings=40, frames=4)
     off = np.array([0.3, -0.2, 0.1])
@@ -311,7 +311,7 @@ def _usd_skinned(path, clip, times):
     stage = Usd.Stage.Open(str(path))
     mesh = next(p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh))
     skel = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Skeleton))
-    from runtime import schema
+    from colossus.runtime import schema
 
     anims = {p.GetCustomDataByKey(schema.CLIP_NAME_KEY) or p.GetName(): p
              for p in stage.Traverse() if p.IsA(UsdSkel.Animation)}
@@ -375,7 +375,7 @@ def proxies(tmp_path_factory):
 
 
 def _full_findings(src, tmp):
-    from validators import check_asset
+    from colossus.validators import check_asset
 
     full = tmp / f"{src.name}.full.usda"
     r = CliRunner().invoke(main, ["import", str(src), "-o", str(full)])
@@ -393,8 +393,8 @@ def test_target_faces_2000_done_when(src, proxies, tmp_path):
         pytest.skip(f"{src} is absent (corpus not beside the clone)")
     from pxr import Usd, UsdGeom
 
-    from runtime import schema
-    from validators import check_asset
+    from colossus.runtime import schema
+    from colossus.validators import check_asset
 
     summary, prox = proxies(src)
     simp = summary["stages"]["simplify"]["counts"]
@@ -459,8 +459,8 @@ def test_dense_measurement_every_character(src, proxies, tmp_path):
 # ------------------------------------------------------------------------------ summary, inspect, render, README
 def test_readme_proxy_example_is_the_import_output(proxies):
     """The README's proxy lines and deviation table are what importing the creature prints."""
-    from pipeline.cli_import import proxy_lines
-    from pipeline.stages import StageReport
+    from colossus.cli.import_ import proxy_lines
+    from colossus.pipeline.stages import StageReport
 
     summary, _ = proxies(ROOT / "samples" / "creature.glb")
     simp = summary["stages"]["simplify"]
@@ -478,7 +478,7 @@ def test_readme_proxy_example_is_the_import_output(proxies):
 
 
 def test_inspect_shows_the_proxy(proxies):
-    from validators.cli_inspect import inspect_cmd
+    from colossus.cli.inspect import inspect_cmd
 
     summary, prox = proxies(ROOT / "samples" / "creature.glb")
     c = summary["stages"]["simplify"]["counts"]
@@ -493,7 +493,7 @@ def test_validate_source_on_a_proxy(proxies, tmp_path):
     passes COL6xx; a proxy whose skin no longer matches it (weights changed) fails COL601."""
     from pxr import Usd, UsdSkel
 
-    from validators.cli import validate_cmd
+    from colossus.cli.validate import validate_cmd
 
     src = ROOT / "samples" / "creature.glb"
     _, prox = proxies(src)
@@ -514,7 +514,7 @@ def test_validate_source_on_a_proxy(proxies, tmp_path):
 def test_render_source_draws_the_full_mesh_behind_the_proxy(tmp_path):
     from PIL import Image
 
-    from validators.cli_render import render_cmd
+    from colossus.cli.render import render_cmd
 
     src = ROOT / "samples" / "limb.glb"
     prox = tmp_path / "limb300.usda"

@@ -9,13 +9,13 @@ import pytest
 
 import naive
 import synth
-from pipeline.geometry import min_sphere, min_spheres
-from pipeline.stages.orient import orient
-from pipeline.stages.parts import parts
-from pipeline.stages.spheres import pose_transforms, slack_pose_indices, spheres
-from runtime.kernels.skin import skin_frames
-from pipeline.stages.weld import weld, weld_maps
-from pipeline.tolerances import WELD_WEIGHT
+from colossus.pipeline.geometry import min_sphere, min_spheres
+from colossus.pipeline.stages.orient import orient
+from colossus.pipeline.stages.parts import parts
+from colossus.pipeline.stages.spheres import pose_transforms, slack_pose_indices, spheres
+from colossus.runtime.kernels.skin import skin_frames
+from colossus.pipeline.stages.weld import weld, weld_maps
+from colossus.pipeline.tolerances import WELD_WEIGHT
 
 
 def snapshot(mesh):
@@ -447,7 +447,7 @@ def test_spheres_hold_under_a_sheared_joint():
     """A parent's non-uniform stretch under a rotated child shears the child's transform: its
     sphere, moved by the joint and scaled by the largest axis scale (the contract's rule), must
     still hold every vertex (mannequiny's stretched thighs made COL403 fail)."""
-    from pipeline.model import Clip
+    from colossus.pipeline.model import Clip
 
     mesh = synth.make_tube(frames=6)
     bend = mesh.clip("bend").local.copy()
@@ -498,9 +498,9 @@ def test_stored_clips_error_within_its_bound_and_far_below_plain_rounding(k):
     model down a stretched chain; storage with corrected translations (``stages.write._store_clip``)
     errs a fraction of that and stays inside the bound it states, measured by the naive skinning
     reference on every frame."""
-    from pipeline.stages.write import stored_clips
-    from pipeline.tolerances import model_scale
-    from pipeline.xforms import compose_trs, decompose_trs
+    from colossus.pipeline.stages.write import stored_clips
+    from colossus.pipeline.tolerances import model_scale
+    from colossus.pipeline.xforms import compose_trs, decompose_trs
 
     mesh = _stretched_tube(k)
     mesh = mesh.replace(source={"clip_info": [{"name": c.name} for c in mesh.clips]})
@@ -536,8 +536,8 @@ def test_stretched_chain_written_passes_the_continuous_certificate(tmp_path):
     radius ``r`` as ``r * s_lo / s_hi``; the spheres stage must grow by that ratio too, or the
     validator cannot certify what the import wrote (mannequiny's and lumberjack's stretched legs
     failed COL407 so)."""
-    from pipeline.stages.write import stored_clips, write
-    from validators import check_asset
+    from colossus.pipeline.stages.write import stored_clips, write
+    from colossus.validators import check_asset
 
     mesh = _stretched_tube(frames=7)
     mesh, _ = parts(mesh)

@@ -11,13 +11,13 @@ import pytest
 from pxr import Gf, Usd, Vt
 
 from conftest import ROOT, SAMPLES
-from validators import check_asset
+from colossus.validators import check_asset
 
 
 @pytest.fixture(scope="module")
 def limb(tmp_path_factory):
     """``samples/limb.glb`` imported: (asset path, source path)."""
-    from pipeline.run import import_asset
+    from colossus.pipeline.run import import_asset
 
     d = tmp_path_factory.mktemp("source")
     out = d / "limb.usda"
@@ -115,7 +115,7 @@ def test_col605_unreadable_source(limb, tmp_path):
 
 def test_cli_exit_status(limb, tmp_path):
     asset, src = limb
-    run = lambda *a: subprocess.run([sys.executable, "-m", "pipeline.cli", "validate", *map(str, a)],
+    run = lambda *a: subprocess.run([sys.executable, "-m", "colossus", "validate", *map(str, a)],
                                     capture_output=True, text=True, cwd=ROOT)
     assert run(asset, "--source", src).returncode == 0
     assert run(asset, "--source", SAMPLES / "limb.fbx").returncode == 0  # a warning only
@@ -133,9 +133,9 @@ def test_centimetre_mesh_bound_by_scaled_joints_judged_at_its_posed_size(tmp_pat
     src = ROOT.parent / "shared" / "corpus" / "realworld" / "playcanvas_lumberjack.glb"
     if not src.is_file():
         pytest.skip("corpus file absent")
-    from pipeline.run import import_asset
-    from validators.asset import LoadedAsset, open_stage
-    from validators.source import compare_source
+    from colossus.pipeline.run import import_asset
+    from colossus.validators.asset import LoadedAsset, open_stage
+    from colossus.validators.source import compare_source
 
     out = tmp_path / "lumberjack.usda"
     import_asset(src, out)

@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from usd_fixture import open_copy, write_test_asset
-from validators.cli import validate_cmd
+from colossus.cli.validate import validate_cmd
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -140,13 +140,13 @@ def test_jobs_in_parallel_processes(lib):
 
 
 def test_rules_doc_is_current():
-    from validators.catalog import render
+    from colossus.validators.catalog import render
     doc = (ROOT / "docs" / "rules.md").read_text()
     assert doc == render(), "docs/rules.md is stale: run `python -m validators.catalog > docs/rules.md`"
 
 
 def test_every_rule_has_what_why_example():
-    from validators import all_rules
+    from colossus.validators import all_rules
     for r in all_rules():
         for label in ("What:", "Why:", "Example:"):
             assert label in r.doc, (r.code, label)

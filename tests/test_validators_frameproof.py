@@ -8,8 +8,8 @@ from pxr import Gf, Usd, UsdSkel, Vt
 
 from usd_fixture import build_test_stage, clip_skel, naive_skin
 from usd_reference import part_distances, tightest
-from validators import frameproof as fp
-from validators.asset import LoadedAsset
+from colossus.validators import frameproof as fp
+from colossus.validators.asset import LoadedAsset
 
 
 @pytest.fixture(scope="module")
@@ -165,7 +165,7 @@ def test_proof_memory_does_not_grow_with_frames():
 
 
 def test_chunk_size_respects_the_byte_budget():
-    from validators import tolerances as tol
+    from colossus.validators import tolerances as tol
     for joints, parts in ((200, 200), (3, 3), (5000, 1000)):
         c = fp.chunk_size(joint_count=joints, part_count=parts)
         assert 1 <= c <= tol.CHUNK_FRAMES
@@ -189,7 +189,7 @@ def test_subframes_check_in_between_times(asset):
 def test_subframes_catch_a_failure_between_frames(tmp_path):
     """Frames at +-0.9 rad, straight in between; off-axis sphere centres with radii exactly as
     tight as the frames allow, so only the in-between (straight) pose fails."""
-    from validators import check_asset
+    from colossus.validators import check_asset
     stage = build_test_stage(clips=(("swing", 2),))
     col = stage.GetPrimAtPath("/Tube/Collider")
     c = np.array(col.GetAttribute("colossus:parts:centers").Get())

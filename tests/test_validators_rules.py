@@ -10,7 +10,7 @@ import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdSkel, Vt
 
 from usd_fixture import build_test_stage, open_copy, write_test_asset
-from validators import all_rules, check_asset
+from colossus.validators import all_rules, check_asset
 
 MESH, SKEL, ROOT = "/Tube/Collider", "/Tube/Skeleton", "/Tube"
 
@@ -275,8 +275,8 @@ def b407(s):
     (straight half-way), centres moved off-axis, radii exactly as tight as the frames allow (the
     exact farthest vertex over every frame, from the proof run without its continuous part)."""
     from usd_fixture import clip_locals
-    from validators import frameproof as fp
-    from validators.asset import LoadedAsset
+    from colossus.validators import frameproof as fp
+    from colossus.validators.asset import LoadedAsset
 
     times, _, q, _ = clip_locals("swing", 24)
     ra = _attr(s, f"{ROOT}/bend", "rotations")
@@ -342,7 +342,7 @@ def test_col001_corrupt_and_truncated(tmp_path, good_path):
 
 
 def test_col002_checker_error_is_kept_apart(monkeypatch, good_path):
-    from validators import registry
+    from colossus.validators import registry
 
     def boom(asset, ctx):
         raise ZeroDivisionError("kaboom")
@@ -362,7 +362,7 @@ def test_col003_missing_path(tmp_path):
 
 
 def test_col102_usd_validation_warnings_pass_through(monkeypatch, good_path):
-    from validators.rules import structure
+    from colossus.validators.rules import structure
     monkeypatch.setattr(structure, "_usd_validation",
                         lambda asset: [("Warn", "some:Validator.Thing", "a note", ["/Tube"])])
     r = check_asset(good_path)
@@ -443,7 +443,7 @@ def test_broken_prerequisite_skips_dependent_rules_with_reason(good_path):
 
 
 def test_col701_proxy_deviation_within_max_deviation(good_path):
-    from runtime import schema
+    from colossus.runtime import schema
 
     stage = open_copy(good_path)
     mesh = stage.GetPrimAtPath(MESH)

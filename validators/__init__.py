@@ -2,7 +2,7 @@
 
 Public API::
 
-    from validators import check_asset
+    from colossus.validators import check_asset
     report = check_asset("boss.usda", select=None, ignore=["COL404"], subframes=2)
     report.passed, report.findings   # Finding(code, severity, message, rule, location)
 

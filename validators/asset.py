@@ -16,9 +16,9 @@ from functools import cached_property
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel
 
-from runtime import asset as runtime_asset
-from runtime import schema
-from runtime.errors import ColliderError
+from colossus.runtime import asset as runtime_asset
+from colossus.runtime import schema
+from colossus.runtime.errors import ColliderError
 
 from . import tolerances as tol
 
@@ -320,7 +320,7 @@ class LoadedAsset:
     def _overflow(self, c: Clip, d):
         """``(time, joint)`` of the first sample where composing the clip's finite joint values
         down the hierarchy overflows (beyond :data:`COMPOSED_LIMIT`), else None."""
-        from runtime.kernels import pose as PK
+        from colossus.runtime.kernels import pose as PK
 
         if self.parents is None or self.rest is None or not len(c.times):
             return None
@@ -536,7 +536,7 @@ class LoadedAsset:
     @cached_property
     def rig(self):
         """The asset as :class:`runtime.certify.Rig` (needs ``ready("proof")``)."""
-        from runtime.certify import Rig
+        from colossus.runtime.certify import Rig
 
         poff, pverts = self.part_vertices
         return Rig(self.points, self.jidx, self.jw, self.geom_bind, self.bind, self.rest, self.parents,

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from runtime import certify as C
-from runtime.kernels.skin import part_farthest, skin_frames  # noqa: F401  (the one skinning kernel)
+from colossus.runtime import certify as C
+from colossus.runtime.kernels.skin import part_farthest, skin_frames  # noqa: F401  (the one skinning kernel)
 
 from . import tolerances as tol
 

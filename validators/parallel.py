@@ -28,9 +28,9 @@ import json
 import os
 from dataclasses import dataclass, field
 
-from pipeline.engine import Engine, InlineBackend, Progress, Task, crash_hook, expand_inputs, make_backend
-from pipeline.isolation import ChildFailed, contained
-from pipeline.readers import USD_EXTENSIONS
+from colossus.pipeline.engine import Engine, InlineBackend, Progress, Task, crash_hook, expand_inputs, make_backend
+from colossus.pipeline.isolation import ChildFailed, contained
+from colossus.pipeline.readers import USD_EXTENSIONS
 
 from .runner import OPEN_FAILED, READ_FAILED, _crash_report, check_asset, unreadable_report
 
@@ -66,7 +66,7 @@ def _probe(path):
     :class:`validators.asset.LoadedAsset` reads, and every time sample of every clip (crate
     values are decoded lazily, on first read).  Returns None, or the ``COL001`` message of
     :func:`check_asset` when the asset cannot be opened or read (so it is not read twice)."""
-    from pipeline.errors import one_line
+    from colossus.pipeline.errors import one_line
 
     from .asset import CLIP_ATTRS, LoadedAsset, open_stage
     try:

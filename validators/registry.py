@@ -27,14 +27,14 @@ from .findings import SEVERITIES
 
 #: Families in code order: (prefix, module, title).
 FAMILIES = (
-    ("COL0", "validators.rules.general", "General: reading the asset, checker errors"),
-    ("COL1", "validators.rules.structure", "Structure: prims, metadata, parts attributes"),
-    ("COL2", "validators.rules.mesh", "Mesh: the triangle geometry"),
-    ("COL3", "validators.rules.skin", "Skin: joint influences and bind pose"),
-    ("COL4", "validators.rules.parts", "Parts: spheres that must hold on every frame"),
-    ("COL5", "validators.rules.animation", "Animation: the clips"),
-    ("COL6", "validators.rules.source", "Source: the asset against the export it was made from (`--source`)"),
-    ("COL7", "validators.rules.proxy", "Proxy: a simplified collision mesh and its deviation"),
+    ("COL0", "colossus.validators.rules.general", "General: reading the asset, checker errors"),
+    ("COL1", "colossus.validators.rules.structure", "Structure: prims, metadata, parts attributes"),
+    ("COL2", "colossus.validators.rules.mesh", "Mesh: the triangle geometry"),
+    ("COL3", "colossus.validators.rules.skin", "Skin: joint influences and bind pose"),
+    ("COL4", "colossus.validators.rules.parts", "Parts: spheres that must hold on every frame"),
+    ("COL5", "colossus.validators.rules.animation", "Animation: the clips"),
+    ("COL6", "colossus.validators.rules.source", "Source: the asset against the export it was made from (`--source`)"),
+    ("COL7", "colossus.validators.rules.proxy", "Proxy: a simplified collision mesh and its deviation"),
 )
 
 

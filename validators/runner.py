@@ -9,7 +9,7 @@ from pathlib import Path
 
 from pxr import Tf, Usd
 
-from pipeline.errors import one_line
+from colossus.pipeline.errors import one_line
 
 from . import tolerances as tol
 from .asset import LoadedAsset, open_stage
@@ -59,7 +59,7 @@ class Context:
         self.slack_ratio = float(opts["slack_ratio"])
         self.chunk_frames = opts["chunk_frames"]
         self.clip_proofs = opts["clip_proofs"]
-        from pipeline.stages.simplify import parse_max_deviation
+        from colossus.pipeline.stages.simplify import parse_max_deviation
         #: ``(length, relative)`` or None: the COL701 limit (``--max-deviation``)
         self.max_deviation = parse_max_deviation(opts["max_deviation"])
         self.source = opts["source"]
@@ -203,7 +203,7 @@ def require_passing(path) -> AssetReport:
     """Run every rule on ``path`` and raise :class:`runtime.ColliderError` (one line listing the
     first error findings) when any has severity error; the verifier game code hands to
     ``runtime.load_collider(path, verify=require_passing)``.  Returns the report otherwise."""
-    from runtime.errors import ColliderError
+    from colossus.runtime.errors import ColliderError
 
     report = check_asset(path)
     errs = [f for f in report.findings if f.severity == "error"]

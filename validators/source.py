@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from runtime import schema
+from colossus.runtime import schema
 
 from . import tolerances as tol
 
@@ -69,9 +69,9 @@ def provenance(asset) -> dict:
 def compare_source(asset, source_path, chunk_frames: int = 64) -> SourceCheck:
     """Compare ``asset`` (a :class:`~validators.asset.LoadedAsset` whose skin and clips are usable)
     with the export ``source_path``.  Never raises for a bad source: ``error`` says why."""
-    from pipeline.errors import ColossusError
-    from pipeline.model import skel_transforms, skin_points
-    from pipeline.run import build_collider, read_baked, settings_from_provenance, sha256_of
+    from colossus.pipeline.errors import ColossusError
+    from colossus.pipeline.model import skel_transforms, skin_points
+    from colossus.pipeline.run import build_collider, read_baked, settings_from_provenance, sha256_of
     from scipy.spatial import cKDTree
 
     from .frameproof import skin_frames, skinning_transforms

@@ -16,8 +16,8 @@ import os
 import numpy as np
 from pxr import UsdGeom
 
-from runtime import schema
-from runtime.errors import ColossusError, one_line
+from colossus.runtime import schema
+from colossus.runtime.errors import ColossusError, one_line
 
 from .asset import LoadedAsset, open_stage
 

@@ -51,7 +51,7 @@ import numpy as np
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
-from runtime.kernels.query import _closest_on_triangle
+from colossus.runtime.kernels.query import _closest_on_triangle
 
 #: Pairs per task of the parallel kernels (the scratch buffer is allocated once per task).
 BLOCK = 512

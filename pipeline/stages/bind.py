@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from runtime.schema import parents_first
+from colossus.runtime.schema import parents_first
 
 from ..errors import InputError
 from ..model import Clip, SkinnedMesh

@@ -20,8 +20,8 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from pipeline.model import SkinnedMesh
-from pipeline.stages import StageReport
+from colossus.pipeline.model import SkinnedMesh
+from colossus.pipeline.stages import StageReport
 
 #: A closed shell whose |signed volume| is below this fraction of the sum of its faces' absolute
 #: volume terms has no usable inside; it falls back to the majority rule.

@@ -14,10 +14,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import coo_matrix
 
-from pipeline.model import SkinnedMesh, Parts
-from runtime.schema import parents_first
-from pipeline.stages import StageReport
-from pipeline.tolerances import PARTS_ANY_THRESHOLD
+from colossus.pipeline.model import SkinnedMesh, Parts
+from colossus.runtime.schema import parents_first
+from colossus.pipeline.stages import StageReport
+from colossus.pipeline.tolerances import PARTS_ANY_THRESHOLD
 
 MODES = ("dominant", "any")
 

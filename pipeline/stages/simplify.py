@@ -67,7 +67,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from runtime.kernels.skin import skin_frames
+from colossus.runtime.kernels.skin import skin_frames
 
 from ..errors import UsageError
 from ..geometry.collapse import apply_collapses, vertex_quadrics

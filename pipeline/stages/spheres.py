@@ -42,15 +42,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.geometry.minsphere import largest_min_sphere, min_sphere
-from pipeline.model import SkinnedMesh, Parts, skel_transforms
-from pipeline.stages import StageReport
-from pipeline.tolerances import SPHERE_PAD_RADIUS, SPHERE_PAD_RELATIVE, model_scale
-from pipeline.xforms import decompose_trs
-from runtime import certify
-from runtime.asset import ClipData
-from runtime.kernels import skin as SK
-from runtime.schema import part_vertex_csr
+from colossus.pipeline.geometry.minsphere import largest_min_sphere, min_sphere
+from colossus.pipeline.model import SkinnedMesh, Parts, skel_transforms
+from colossus.pipeline.stages import StageReport
+from colossus.pipeline.tolerances import SPHERE_PAD_RADIUS, SPHERE_PAD_RELATIVE, model_scale
+from colossus.pipeline.xforms import decompose_trs
+from colossus.runtime import certify
+from colossus.runtime.asset import ClipData
+from colossus.runtime.kernels import skin as SK
+from colossus.runtime.schema import part_vertex_csr
 
 #: ``slack_ratio`` uses exact per-pose minimal spheres on the bind pose and on at most this many
 #: evenly spaced frames of each clip (first and last included): enough to characterise the slack,

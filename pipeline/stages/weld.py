@@ -20,9 +20,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from pipeline.model import SkinnedMesh, Parts
-from pipeline.stages import StageReport
-from pipeline.tolerances import WELD_RELATIVE, WELD_WEIGHT, model_scale
+from colossus.pipeline.model import SkinnedMesh, Parts
+from colossus.pipeline.stages import StageReport
+from colossus.pipeline.tolerances import WELD_RELATIVE, WELD_WEIGHT, model_scale
 
 
 def canonical_influences(joint_indices: np.ndarray, joint_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

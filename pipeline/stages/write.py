@@ -23,7 +23,7 @@ import tempfile
 
 import numpy as np
 
-from runtime import schema
+from colossus.runtime import schema
 
 from ..errors import OutputError
 from ..model import SkinnedMesh
@@ -157,7 +157,7 @@ def _store_clip(local: np.ndarray, parents: np.ndarray, centers: np.ndarray):
     norms : (f, b) float64
         ``||D_j||_2`` per frame and joint.
     """
-    from runtime.schema import parents_first
+    from colossus.runtime.schema import parents_first
 
     from ..xforms import quat_to_matrix
 
@@ -212,7 +212,7 @@ def _posed_size(mesh: SkinnedMesh, local: np.ndarray) -> float:
     joint-local transforms ``local`` (b, 4, 4): the model as a clip moves it (bind-space positions
     can be at another scale: lumberjack's mesh is authored in centimetres, bound by x100 binds,
     and moved in metres)."""
-    from runtime.kernels.skin import skin_frames
+    from colossus.runtime.kernels.skin import skin_frames
 
     from ..model import skel_transforms
     from ..tolerances import model_scale

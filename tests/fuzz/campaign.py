@@ -62,9 +62,9 @@ def _worker(conn, timeout, keep, memory):
     import resource
 
     from . import oracle
-    from pipeline.cli import main  # noqa: F401  (load everything before measuring the address space)
-    import pipeline.cli_import  # noqa: F401
-    import validators.cli  # noqa: F401
+    from colossus.cli import main  # noqa: F401  (load everything before measuring the address space)
+    import colossus.cli.import_  # noqa: F401
+    import colossus.cli.validate  # noqa: F401
 
     with open("/proc/self/statm") as fh:
         mapped = int(fh.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")

@@ -92,7 +92,7 @@ def _invoke(args):
     """``colossus ARGS`` in-process: (exit code, stdout, stderr, escaped exception, warnings, native)."""
     from click.testing import CliRunner
 
-    from pipeline.cli import main
+    from colossus.cli import main
 
     with captured_fd2() as native, warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -104,7 +104,7 @@ def _invoke(args):
 
 def _subprocess(args, timeout):
     env = {**os.environ, "PYTHONWARNINGS": "default"}
-    p = subprocess.run([sys.executable, "-m", "pipeline.cli", *args], capture_output=True, text=True,
+    p = subprocess.run([sys.executable, "-m", "colossus", *args], capture_output=True, text=True,
                        timeout=timeout, env=env)
     return p.returncode, p.stdout, p.stderr, None, [], ""
 

@@ -75,7 +75,7 @@ def derived_seeds(work: str, formats=None) -> tuple:
     """
     from pxr import Sdf
 
-    from pipeline.run import import_asset
+    from colossus.pipeline.run import import_asset
 
     os.makedirs(work, exist_ok=True)
     imports, assets = [], []

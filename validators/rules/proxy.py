@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from runtime import schema
+from colossus.runtime import schema
 
 from ..registry import hit, rule
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from pxr import UsdGeom, UsdPhysics
 
-from runtime import schema
+from colossus.runtime import schema
 
 from ..registry import hit, rule
 

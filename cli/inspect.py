@@ -7,7 +7,7 @@ import json
 
 import click
 
-from pipeline.cli import maps_errors
+from colossus.cli._errors import maps_errors
 
 
 @click.command("inspect")
@@ -17,7 +17,7 @@ from pipeline.cli import maps_errors
 def inspect_cmd(path, as_json):
     """Print a readable summary of the collider asset PATH: stage metadata, counts, the joint
     tree, clips (frames, seconds), parts (joint, faces, radius) and provenance."""
-    from .summary import format_summary, open_asset, summarize
+    from colossus.validators.summary import format_summary, open_asset, summarize
 
     s = summarize(open_asset(path))
     if as_json:

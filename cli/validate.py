@@ -10,7 +10,7 @@ import sys
 
 import click
 
-from pipeline.cli import maps_errors
+from colossus.cli._errors import maps_errors
 
 
 def _codes(values):
@@ -23,7 +23,7 @@ def _codes(values):
 def _list_rules(ctx, param, value):
     if not value or ctx.resilient_parsing:
         return
-    from .registry import all_rules
+    from colossus.validators.registry import all_rules
     for r in all_rules():
         click.echo(f"{r.code}  {r.severity:<7}  {r.name:<26} {r.summary}")
     ctx.exit(0)
@@ -71,9 +71,9 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
     *.usdc, *.usdz) or globs ('assets/**/*.usda').  Exit 0 all pass, 1 any error finding,
     2 a path unreadable or usage, 130 interrupted (the report so far is still written, marked
     INCOMPLETE)."""
-    from .registry import RuleSelector
-    from .parallel import check_many
-    from .report import render as render_report, write_atomic
+    from colossus.validators.registry import RuleSelector
+    from colossus.validators.parallel import check_many
+    from colossus.validators.report import render as render_report, write_atomic
 
     if not paths:
         raise click.UsageError("give at least one asset file or directory")
@@ -89,13 +89,13 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
             raise click.UsageError(f"--severity {s!r}: expected CODE=error|warning|info")
         sev[code.strip().upper()] = level
     try:
-        from .registry import get_rule
+        from colossus.validators.registry import get_rule
         for code in sev:
             get_rule(code)
     except KeyError as e:
         raise click.UsageError(f"--severity: unknown rule code {e}")
 
-    from pipeline.stages.simplify import parse_max_deviation
+    from colossus.pipeline.stages.simplify import parse_max_deviation
     parse_max_deviation(max_deviation)  # a bad value is a usage error (exit 2) before any asset is read
     if source is not None and not __import__("os").path.isfile(source):
         click.echo(f"error: --source {source}: no such file", err=True)
@@ -112,7 +112,13 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
     if res.interrupted:
         click.echo(f"error: interrupted; {len(res.unchecked)} asset(s) not checked, "
                    "the report is INCOMPLETE", err=True)
-    text = render_report(fmt, reports, verbose=verbose, unchecked=res.unchecked if res.interrupted else None)
+    unchecked = res.unchecked if res.interrupted else None
+    if fmt == "html":  # pictures: the render floor
+        from colossus.render.html import format_html
+
+        text = format_html(reports, unchecked=unchecked)
+    else:
+        text = render_report(fmt, reports, verbose=verbose, unchecked=unchecked)
     if output:
         write_atomic(output, text)
     else:

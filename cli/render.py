@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import click
 
-from pipeline.cli import maps_errors
-from runtime.errors import ColossusError, one_line
+from colossus.cli._errors import maps_errors
+from colossus.runtime.errors import ColossusError, one_line
 
 SUFFIXES = (".png", ".gif")
 
@@ -36,8 +36,8 @@ def render_cmd(path, output, clip, time_, size, max_frames, source):
     offending vertices are marked in yellow.  With --source, the full skinned mesh of the export
     (imported with the asset's own settings, posed by the asset's joints) is drawn faint grey
     behind it, so the fit of a simplified proxy shows."""
-    from .render import RenderError, parse_size, render_gif, render_png, source_mesh
-    from .summary import open_asset
+    from colossus.render.draw import RenderError, parse_size, render_gif, render_png, source_mesh
+    from colossus.validators.summary import open_asset
 
     suffix = output[output.rfind("."):].lower() if "." in output else ""
     if suffix not in SUFFIXES:
@@ -52,7 +52,7 @@ def render_cmd(path, output, clip, time_, size, max_frames, source):
         asset = open_asset(path)
         full = None
         if source is not None:
-            from .render import check_drawable
+            from colossus.render.draw import check_drawable
 
             check_drawable(asset)
             full = source_mesh(asset, source)

@@ -71,8 +71,8 @@ def make_bench_asset(path):
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
     from scipy.spatial.transform import Rotation  # benchmark data only (the runtime needs no scipy)
 
-    from . import schema
-    from .collider import load_collider
+    from colossus.runtime import schema
+    from colossus.runtime.collider import load_collider
 
     pts, tris = _geometry()
     seg = LENGTH / JOINTS
@@ -218,7 +218,7 @@ def run_bench(path=None, repeat=50):
     import trimesh
     from pxr import Gf, Usd, UsdSkel, Vt
 
-    from .collider import load_collider
+    from colossus.runtime.collider import load_collider
 
     tmp = None
     if path is None:
@@ -292,8 +292,8 @@ def run_bench(path=None, repeat=50):
     base3 = _median_time(lambda: trimesh.proximity.closest_point(m, centers[next(it2) % 64][None]),
                          max(10, repeat // 2), warm=2)
     # -- 5: any pose (IK / ragdoll): pose_from_joints with random joint rotations up to 180 degrees
-    from .kernels import bounds as B
-    from .kernels.pose import trs_matrices
+    from colossus.runtime.kernels import bounds as B
+    from colossus.runtime.kernels.pose import trs_matrices
 
     rest = d.rest_local
     rot = rng.normal(size=(64, len(d.joints), 3))
@@ -346,7 +346,7 @@ def bench_controller(col, steps=250, rate=60.0, rounds=3):
     the pose, where every query of the frame shares it).  The walking row's note adds
     a lazily skinned frame: the pose (joints) and the step, nothing else read, so only the parts
     the player reaches are skinned."""
-    from .controller import STANDING, CharacterController, Intent
+    from colossus.runtime.controller import STANDING, CharacterController, Intent
 
     r = 0.035 * col.size()
     tc = col.data.time_codes_per_second

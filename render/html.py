@@ -18,7 +18,7 @@ import base64
 import html
 import io
 
-from .findings import SEVERITY_RANK, summary_line
+from colossus.validators.findings import SEVERITY_RANK, summary_line
 
 #: Codes whose findings say the file could not be read at all (no pictures then).
 UNREADABLE = ("COL001", "COL003")
@@ -66,7 +66,7 @@ def slack_plot(asset, dpi: int = 80) -> bytes:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from .render import part_colors, slack_series
+    from colossus.render.draw import part_colors, slack_series
 
     clips = [c for c in asset.clips if len(c.times)]
     P = len(asset.part_joints)
@@ -105,8 +105,8 @@ def _pictures(report, size=(640, 480)) -> str:
     """The picture and slack plot of one asset, or a note saying why there are none."""
     if any(f.code in UNREADABLE for f in report.findings):
         return '<p class="note">no pictures: the asset could not be read</p>'
-    from .render import RenderError, png_bytes, pose_at, render_image
-    from .summary import AssetError, one_line, open_asset
+    from colossus.render.draw import RenderError, png_bytes, pose_at, render_image
+    from colossus.validators.summary import AssetError, one_line, open_asset
 
     try:
         asset = open_asset(report.path)

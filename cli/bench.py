@@ -9,9 +9,9 @@ import os
 
 import click
 
-from pipeline.bench import bench_import, bench_scaling, bench_simplify
+from colossus.bench.import_ import bench_import, bench_scaling, bench_simplify
 
-from .bench import coldstart, format_bench, format_scale_bench, run_bench, run_scale_bench
+from colossus.bench.validate import coldstart, format_bench, format_scale_bench, run_bench, run_scale_bench
 
 
 @click.command("bench")
@@ -35,7 +35,7 @@ def bench_cmd(quick, only):
         click.echo(format_bench(run_bench()))
         click.echo()
     if "runtime" in want:
-        from runtime.bench import format_rows as rt_format, run_bench as rt_run
+        from colossus.bench.runtime import format_rows as rt_format, run_bench as rt_run
         click.echo(rt_format(rt_run()))
     if "coldstart" in want:
         click.echo("\ncold start (NUMBA_CACHE_DIR pointed at an empty folder; goal < 5 s cold) and warm:")

@@ -35,10 +35,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from runtime.errors import ColossusError
+from colossus.runtime.errors import ColossusError
 
-from . import frameproof as fp
-from . import tolerances as tol
+from colossus.validators import frameproof as fp
+from colossus.validators import tolerances as tol
 
 #: Colour of a failing part, its sphere, and of the markers on its offending vertices.
 FAIL_RGB = (0.95, 0.04, 0.04)
@@ -115,8 +115,8 @@ def source_mesh(asset, path) -> SourceMesh:
     joint of the asset's, and the import's own errors for an unreadable file."""
     from pxr import UsdSkel
 
-    from pipeline.run import build_collider, settings_from_provenance
-    from runtime import schema
+    from colossus.pipeline.run import build_collider, settings_from_provenance
+    from colossus.runtime import schema
 
     prov = asset.mesh.GetCustomDataByKey(schema.PROVENANCE_KEY) if asset.mesh is not None else None
     settings = settings_from_provenance(dict((prov if isinstance(prov, dict) else {}).get("settings") or {}))
@@ -235,7 +235,10 @@ def part_colors(P: int) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------- drawing
-def _pyvista():
+def offscreen_pyvista():
+    """pyvista set up to draw offscreen, VTK's warnings silenced: the one set-up every picture of
+    the project uses (``render``, ``play``, the HTML report).  On Linux without a display it asks VTK
+    for an EGL window where EGL exists."""
     if sys.platform.startswith("linux") and not os.environ.get("DISPLAY") and ctypes.util.find_library("EGL"):
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     import pyvista as pv
@@ -289,7 +292,7 @@ class Renderer:
     def __init__(self, asset, size=(800, 600), fit=(), source=None):
         from pxr import UsdGeom
 
-        pv = _pyvista()
+        pv = offscreen_pyvista()
         self.pv = pv
         self.asset = asset
         self.size = tuple(size)

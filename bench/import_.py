@@ -28,11 +28,11 @@ def bench_import(triangles=200_000, bones=60, clips=2, frames=120, echo=print):
     """Import a synthetic skinned tube (a real .glb); ratio of the whole import to assimp's load alone."""
     import assimp_py
 
-    from .isolation import read_isolated
-    from .readers import read
-    from .readers.assimp_reader import _flags
-    from .run import import_asset
-    from .synth.glb import write_glb
+    from colossus.pipeline.isolation import read_isolated
+    from colossus.pipeline.readers import read
+    from colossus.pipeline.readers.assimp_reader import _flags
+    from colossus.pipeline.run import import_asset
+    from colossus.bench.synth import write_glb
 
     with tempfile.TemporaryDirectory() as tmp:
         # warm the numba kernels (compiled once per machine, cached on disk)
@@ -60,10 +60,10 @@ def bench_import(triangles=200_000, bones=60, clips=2, frames=120, echo=print):
 
 def bench_scaling(sizes=(50_000, 200_000, 800_000), echo=print):
     """Weld and orient at three sizes; time / (n log n) should stay flat (or fall)."""
-    from .model import SkinnedMesh
-    from .stages.orient import orient
-    from .stages.weld import weld
-    from .synth.glb import chain_weights, tube
+    from colossus.pipeline.model import SkinnedMesh
+    from colossus.pipeline.stages.orient import orient
+    from colossus.pipeline.stages.weld import weld
+    from colossus.bench.synth import chain_weights, tube
 
     rows = []
     echo("weld and orient scaling (per-corner split tube, as FBX delivers it):")
@@ -95,11 +95,11 @@ def bench_simplify(triangles=200_000, target=5_000, bones=60, clips=2, frames=12
     """The 200,000-triangle tube reduced to ``target`` faces: the simplify stage (decimation and the
     deviation over every frame) beside the rest of the import, and a game frame (pose + 1 sphere
     + 16 rays, :func:`runtime.bench.game_frame`) on the proxy vs on the full mesh."""
-    from runtime import load_collider
-    from runtime.bench import _median_time, game_frame
+    from colossus.runtime import load_collider
+    from colossus.bench.runtime import _median_time, game_frame
 
-    from .run import ImportSettings, import_asset
-    from .synth.glb import write_glb
+    from colossus.pipeline.run import ImportSettings, import_asset
+    from colossus.bench.synth import write_glb
 
     with tempfile.TemporaryDirectory() as tmp:
         small = os.path.join(tmp, "warm.glb")

@@ -23,9 +23,9 @@ import time
 
 import numpy as np
 
-from runtime import schema
+from colossus.runtime import schema
 
-from . import frameproof as fp
+from colossus.validators import frameproof as fp
 
 
 def synthetic_rig(n=20000, b=40, k=4, frames=500, seed=0):
@@ -63,8 +63,8 @@ def synthetic_rig(n=20000, b=40, k=4, frames=500, seed=0):
 def rig_of(r, radii=None):
     """The synthetic rig as :class:`runtime.certify.Rig` and its clip as ``ClipData`` (the local
     transforms' rotations about Z as quaternions, translations, unit scales)."""
-    from runtime.asset import ClipData
-    from runtime.certify import Rig
+    from colossus.runtime.asset import ClipData
+    from colossus.runtime.certify import Rig
 
     b = len(r["bind"])
     F = len(r["skel"])
@@ -87,7 +87,7 @@ def rig_of(r, radii=None):
 def _proof(rig, skel, chunk, tol_abs=1e-6):
     """The sampled proof (tiers K, D, exact) over every frame, chunk by chunk: returns the
     frame bounds, verdicts and per-tier counts."""
-    from runtime.certify import sampled
+    from colossus.runtime.certify import sampled
     F, P = len(skel), rig.P
     bound = np.empty((F, P))
     ok = np.empty((F, P), bool)
@@ -101,7 +101,7 @@ def _proof(rig, skel, chunk, tol_abs=1e-6):
 
 
 def _continuous(rig, clip, bound, ok, tol_abs=1e-6):
-    from runtime.certify import continuous
+    from colossus.runtime.certify import continuous
     return continuous(rig, clip, clip.times, bound, ok, tol_abs, 1e-5)
 
 
@@ -144,7 +144,7 @@ def run_bench(n=20000, joints=40, influences=4, frames=500, repeat=5) -> dict:
     everything) and tight ones (2 % over the exact farthest vertex of every frame, like an
     imported asset: the exact tier does most of the work).  Each time is the best of ``repeat``
     runs (on a shared machine a run is often disturbed; the best is the one that was not)."""
-    from runtime.certify import sampled
+    from colossus.runtime.certify import sampled
 
     r = synthetic_rig(n, joints, influences, frames)
     chunk = fp.chunk_size(joints, joints)
@@ -232,8 +232,8 @@ def coldstart(echo=print, repeat: int = 1) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         asset = os.path.join(tmp, "creature.usda")
         cmds = {
-            "import": [sys.executable, "-m", "pipeline.cli", "import", sample, "-o", asset],
-            "validate": [sys.executable, "-m", "pipeline.cli", "validate", asset],
+            "import": [sys.executable, "-m", "colossus", "import", sample, "-o", asset],
+            "validate": [sys.executable, "-m", "colossus", "validate", asset],
             "load_collider + pose": [sys.executable, "-c", "import sys; from runtime import load_collider; "
                                      "load_collider(sys.argv[1]).pose('walk', 3.5).points", asset],
         }
@@ -266,8 +266,8 @@ def make_library(directory, count=200, triangles=3000, bones=12, clips=3, frames
     """``count`` collider assets for benchmarks and tests: one synthetic ``.glb`` imported once,
     then its USD text copied with every part radius scaled by a random factor in [0.97, 1.3)
     (some assets fail the frame proof, most pass, as in a real library).  Returns the paths."""
-    from pipeline.run import import_asset
-    from pipeline.synth.glb import write_glb
+    from colossus.pipeline.run import import_asset
+    from colossus.bench.synth import write_glb
     os.makedirs(directory, exist_ok=True)
     src = os.path.join(directory, "_source.glb")
     write_glb(src, triangles, bones, clips, frames)
@@ -306,9 +306,9 @@ def run_scale_bench(count=200, triangles=6000, frames=48, echo=print):
     same; return wall times, speed-ups and the cluster path's per-asset overhead."""
     import tempfile
 
-    from pipeline.engine import local_cluster
+    from colossus.pipeline.engine import local_cluster
 
-    from .parallel import check_many, comparable
+    from colossus.validators.parallel import check_many, comparable
 
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -363,7 +363,7 @@ def _noop(i):
 def _task_overhead(n):
     """Seconds per task of submitting ``n`` no-op tasks through the engine to a 2-worker
     LocalCluster (the cluster path's fixed cost per asset, compute excluded)."""
-    from pipeline.engine import DaskBackend, Engine, Task, local_cluster
+    from colossus.pipeline.engine import DaskBackend, Engine, Task, local_cluster
 
     cluster = local_cluster(2)
     try:

@@ -8,9 +8,9 @@ import sys
 
 import click
 
-from .cli import maps_errors
-from .errors import OutputError, UsageError
-from .tolerances import PARTS_ANY_THRESHOLD
+from colossus.cli._errors import maps_errors
+from colossus.pipeline.errors import OutputError, UsageError
+from colossus.pipeline.tolerances import PARTS_ANY_THRESHOLD
 
 LARGE_INPUT_BYTES = 4 * 2**20  # show a progress bar from this input size on (when stderr is a terminal)
 
@@ -120,7 +120,7 @@ def _source_lines(read_rep, mesh=None) -> list:
     where its scales are not exactly 1) of the read stage and of ``mesh`` as written."""
     d = read_rep.details or {}
     lines = []
-    from .run import mesh_provenance
+    from colossus.pipeline.run import mesh_provenance
     meshes = mesh_provenance(d.get("meshes") or [])
     if meshes:
         lines += ["", f"  {'mesh':<28} {'kind':<8} {'vertices':>8}  bound to"]
@@ -198,7 +198,7 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
       colossus import samples/creature.glb -o creature.usda
       colossus import 'exports/*.glb' -o colliders/ --jobs 4
     """
-    from .run import ImportSettings, import_asset
+    from colossus.pipeline.run import ImportSettings, import_asset
 
     settings = ImportSettings(
         up_axis=up_axis.upper(), meters_per_unit=meters_per_unit, max_influences=max_influences,
@@ -207,8 +207,8 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
         source_up_axis=source_up_axis.upper() if source_up_axis else None,
         source_meters_per_unit=source_meters_per_unit, target_faces=target_faces, max_deviation=max_deviation,
     )
-    from .engine import is_glob
-    from .stages.write import OUTPUT_EXTENSIONS
+    from colossus.pipeline.engine import is_glob
+    from colossus.pipeline.stages.write import OUTPUT_EXTENSIONS
     one_file_out = out.lower().endswith(OUTPUT_EXTENSIONS) and not os.path.isdir(out)
     if len(srcs) > 1 or ((os.path.isdir(srcs[0]) or is_glob(srcs[0])) and not one_file_out):
         return _import_many(srcs, out, settings, as_json, progress, jobs, scheduler)
@@ -243,8 +243,8 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
 
 def _import_many(srcs, out, settings, as_json, progress, jobs, scheduler):
     """``colossus import A B ... -o DIR``: see :mod:`pipeline.batch`."""
-    from .batch import format_import_rows, import_many
-    from .stages.write import OUTPUT_EXTENSIONS
+    from colossus.pipeline.batch import format_import_rows, import_many
+    from colossus.pipeline.stages.write import OUTPUT_EXTENSIONS
 
     if os.path.isfile(out) or (not os.path.isdir(out) and out.lower().endswith(OUTPUT_EXTENSIONS)):
         raise UsageError(f"-o {out}: with several inputs, -o is the output directory")

@@ -1,0 +1,62 @@
+"""How the command line reports our errors: one line on stderr and an exit status, the same way
+for every command (click's ``ClickException`` / ``UsageError`` pattern)."""
+
+from __future__ import annotations
+
+import functools
+import os
+
+import click
+
+from colossus.runtime.errors import ColossusError, one_line
+
+
+class CommandError(click.ClickException):
+    """One of our errors on the command line: one line on stderr, ``error: <message>``, and an
+    exit status (click's standalone mode prints it and exits)."""
+
+    def __init__(self, message: str, exit_code: int = 1):
+        super().__init__(message)
+        self.exit_code = exit_code
+
+    def show(self, file=None):
+        click.echo(f"error: {self.format_message()}", err=True)
+
+
+def maps_errors(input_status: int = 1):
+    """Decorate a command so the project's errors become exit statuses, the same way for every
+    command (click's ``ClickException``/``UsageError`` pattern):
+
+    * :class:`pipeline.errors.UsageError` -> 2 (usage);
+    * any other :class:`~runtime.errors.ColossusError` (an unusable input, an unreadable asset,
+      an unwritable output) -> ``input_status`` (1 for ``import``; 2 for ``inspect``/``render``,
+      whose contract says an unreadable asset is status 2);
+    * ``MemoryError`` -> 1 "out of memory"; Ctrl-C -> 130 "interrupted";
+    * anything else -> 1 "internal error (...)" with no traceback (``COLOSSUS_DEBUG=1`` shows it).
+
+    click's own exits and usage errors pass through untouched.
+    """
+    from colossus.pipeline.errors import UsageError
+
+    def wrap(fn):
+        @functools.wraps(fn)
+        def run(*args, **kwargs):
+            try:
+                return fn(*args, **kwargs)
+            except (click.exceptions.Exit, click.ClickException, click.Abort):
+                raise
+            except UsageError as e:
+                raise CommandError(one_line(e), 2) from None
+            except ColossusError as e:
+                raise CommandError(one_line(e, limit=600), input_status) from None
+            except MemoryError:
+                raise CommandError("out of memory", 1) from None
+            except KeyboardInterrupt:
+                raise CommandError("interrupted", 130) from None
+            except Exception as e:  # never a traceback on user input
+                if os.environ.get("COLOSSUS_DEBUG"):
+                    raise
+                raise CommandError(f"internal error ({type(e).__name__}: {one_line(e)}); rerun with "
+                                   "COLOSSUS_DEBUG=1 for details", 1) from None
+        return run
+    return wrap

@@ -1,1 +1,0 @@
-"""Synthetic skinned assets for benchmarks (real files that the real readers load)."""
