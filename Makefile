@@ -9,10 +9,15 @@ OUT     := out
 
 setup: $(STAMP)
 
+# The old distribution name ("colossus") is uninstalled, and numba's on-disk caches are dropped:
+# they are keyed by file, not by module name, so caches made before the one-package move name
+# modules (runtime.kernels...) that no longer exist.
 $(STAMP): pyproject.toml
 	@set -e; py=$$(tools/find-python 12); echo "using $$py ($$($$py --version))"; \
 	  [ -x $(PY) ] || $$py -m venv $(VENV); \
 	  $(PY) -m pip install -q --upgrade pip; \
+	  $(PY) -m pip uninstall -q -y colossus 2>/dev/null || true; \
+	  find runtime pipeline validators -name '*.nb[ic]' -delete; \
 	  $(PY) -m pip install -q -e '.[test,bench,dask]'
 	@touch $(STAMP)
 

@@ -24,7 +24,7 @@ import click
 
 from colossus._version import __version__
 
-from ._errors import CommandError, maps_errors  # noqa: F401  (the commands' shared error mapping)
+from ._errors import CommandError, maps_errors, missing_extra  # noqa: F401  (the commands' shared error mapping)
 
 #: name -> (module, attribute, one-line help shown by ``colossus --help``)
 COMMANDS = {
@@ -54,7 +54,19 @@ class LazyGroup(click.Group):
         if name not in COMMANDS or not self._available(name):
             return None
         mod, attr, _ = COMMANDS[name]
-        return getattr(importlib.import_module(mod), attr)
+        try:
+            return getattr(importlib.import_module(mod), attr)
+        except ModuleNotFoundError as e:  # an optional extra missing: the command says which
+            err = missing_extra(e, name)
+            if err is None:
+                raise
+
+            @click.command(name, context_settings={"ignore_unknown_options": True, "allow_extra_args": True},
+                           add_help_option=False)
+            def unavailable():
+                raise err
+
+            return unavailable
 
     def format_commands(self, ctx, formatter):
         rows = [(name, COMMANDS[name][2]) for name in self.list_commands(ctx)]

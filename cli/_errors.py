@@ -10,6 +10,25 @@ import click
 
 from colossus.runtime.errors import ColossusError, one_line
 
+#: Third-party module -> the optional extra that installs it (``pyproject.toml``).  A runtime-only
+#: install has none of them; a command that needs one says which extra to install.
+EXTRA_OF = {"assimp_py": "pipeline", "scipy": "pipeline", "trimesh": "pipeline", "meshio": "pipeline",
+            "fast_simplification": "pipeline", "pyvista": "render", "vtk": "render", "vtkmodules": "render",
+            "matplotlib": "render", "PIL": "render", "imageio": "render", "dask": "dask",
+            "distributed": "dask", "embreex": "bench", "rtree": "bench"}
+
+
+def missing_extra(e: ModuleNotFoundError, command: str | None = None) -> CommandError | None:
+    """The one-line error (exit 2: this install cannot run it) for a command that needs an optional
+    extra that is not installed; None when ``e`` is not about one."""
+    name = (e.name or "").split(".")[0]
+    extra = EXTRA_OF.get(name)
+    if extra is None:
+        return None
+    what = f"colossus {command}" if command else "this command"
+    return CommandError(f"{what} needs {name}, which is not installed (the {extra!r} extra): "
+                        f"pip install 'colossus-colliders[{extra}]'", 2)
+
 
 class CommandError(click.ClickException):
     """One of our errors on the command line: one line on stderr, ``error: <message>``, and an
@@ -31,6 +50,7 @@ def maps_errors(input_status: int = 1):
     * any other :class:`~runtime.errors.ColossusError` (an unusable input, an unreadable asset,
       an unwritable output) -> ``input_status`` (1 for ``import``; 2 for ``inspect``/``render``,
       whose contract says an unreadable asset is status 2);
+    * a missing optional extra (:data:`EXTRA_OF`) -> 2, naming the extra to install;
     * ``MemoryError`` -> 1 "out of memory"; Ctrl-C -> 130 "interrupted";
     * anything else -> 1 "internal error (...)" with no traceback (``COLOSSUS_DEBUG=1`` shows it).
 
@@ -54,6 +74,11 @@ def maps_errors(input_status: int = 1):
             except KeyboardInterrupt:
                 raise CommandError("interrupted", 130) from None
             except Exception as e:  # never a traceback on user input
+                if isinstance(e, ModuleNotFoundError):  # an optional extra this install lacks
+                    ctx = click.get_current_context(silent=True)
+                    err = missing_extra(e, ctx.info_name if ctx else None)
+                    if err is not None:
+                        raise err from None
                 if os.environ.get("COLOSSUS_DEBUG"):
                     raise
                 raise CommandError(f"internal error ({type(e).__name__}: {one_line(e)}); rerun with "

@@ -205,5 +205,5 @@ def test_graph_sees_every_module(pkg):
     """Guard against a parser that silently finds nothing (the tests above would pass vacuously)."""
     mods, edges = _graph()
     names = [m for m in mods if m == pkg or m.startswith(pkg + ".")]
-    assert len(names) >= 5
-    assert sum(len(edges[m]) for m in names) >= 5
+    assert len(names) >= 4
+    assert sum(len(edges[m]) for m in names) >= 4
