@@ -211,7 +211,7 @@ class Step:
     queries: int
 
 
-# -- kernels (private; tests/naive.py holds their numpy references) --------------------------
+# -- kernels (private; tests/references/naive.py holds their numpy references) --------------------------
 
 
 @njit(cache=True)

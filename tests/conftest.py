@@ -4,8 +4,7 @@ import pathlib
 import numpy as np
 import pytest
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
-SAMPLES = ROOT / "samples"
+from paths import ROOT, SAMPLES  # noqa: F401
 
 
 @pytest.fixture(scope="session")
@@ -35,10 +34,10 @@ def imported(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def odd_path(tmp_path_factory):
-    """An independent asset (tests/usd_fixture) with a geomBindTransform, a translated, rotated
+    """An independent asset (tests/references/usd_fixture) with a geomBindTransform, a translated, rotated
     and scaled (x1.5) SkelRoot, Z up and clips at time codes 100.. ."""
     from pxr import Gf, UsdGeom
-    from usd_fixture import build_test_stage
+    from references.usd_fixture import build_test_stage
 
     p = tmp_path_factory.mktemp("odd") / "odd.usda"
     gb = np.eye(4)
@@ -58,7 +57,7 @@ def odd_skel_path(tmp_path_factory):
     x0.8 scale; the SkelRoot untouched): the skeleton's world transform the contract moves
     spheres by."""
     from pxr import Gf, UsdGeom
-    from usd_fixture import build_test_stage
+    from references.usd_fixture import build_test_stage
 
     p = tmp_path_factory.mktemp("odd_skel") / "odd_skel.usda"
     stage = build_test_stage(path=str(p))

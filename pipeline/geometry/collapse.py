@@ -28,7 +28,7 @@ Collapses are looked at in history order until the live faces reach ``stop_faces
 steps have been looked at; the outcome is deterministic in both, so a prefix search over ``limit``
 (``--max-deviation``) sees a proxy that only gets coarser as ``limit`` grows.
 
-Reference: ``tests/naive.py::apply_collapses`` (Python sets, the same rules).
+Reference: ``tests/references/naive.py::apply_collapses`` (Python sets, the same rules).
 """
 
 from __future__ import annotations

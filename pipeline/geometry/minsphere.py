@@ -22,7 +22,7 @@ stage sees.
 
 :func:`min_sphere` and :func:`min_spheres` validate their input; :func:`largest_min_sphere`
 gives the largest of the per-set minimal radii exactly while solving only the sets that can be
-the largest.  ``tests/naive.py`` holds a brute-force reference (every support set of up to 4
+the largest.  ``tests/references/naive.py`` holds a brute-force reference (every support set of up to 4
 points).
 """
 

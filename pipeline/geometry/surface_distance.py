@@ -34,7 +34,7 @@ other pose a sample is first bounded by its exact distance to its home triangle 
 point-triangle test); only samples of pieces still above the threshold get the exact distance to
 all their candidates.  Both directions share one skinning per pose chunk (``frames``).
 
-Kernels (private, ``_``-prefixed; readable references in ``tests/naive.py``)
+Kernels (private, ``_``-prefixed; readable references in ``tests/references/naive.py``)
 --------------------------------------------------------------------------
 ``_sample_distances``: for (pose, sample) pairs, the distance to the nearest of a candidate row;
 ``_piece_bounds``: for (pose, piece) pairs, the smaller of the two bounds above;

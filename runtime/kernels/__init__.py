@@ -1,6 +1,6 @@
 """The project's numba kernels, one module per concern (private ``_``-prefixed kernels behind
-validating public wrappers; each checked against a slow numpy reference in ``tests/naive.py``
-or ``tests/test_runtime_naive.py``):
+validating public wrappers; each checked against a slow numpy reference in ``tests/references/naive.py``
+or ``tests/references/naive_queries.py``):
 
 * :mod:`~runtime.kernels.skin`: the one linear-blend-skinning kernel (runtime, frame proof,
   continuous certificate, import spheres stage);

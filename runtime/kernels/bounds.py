@@ -694,7 +694,7 @@ def factor_terms(L, t, q, s, anim, rest_local, omega_margin: float, alpha_margin
     Li (T, J, 4, 4) the inverses of ``L``; fw, iv (I, J, 3) forward / inverse ``(n0, n1, n2)``;
     dt (I, J); eps (I, J, 2); iso (I, J) bool (I = T - 1).  ``compiled``: force the kernel (True)
     or the numpy path (False); default by size (:data:`FACTOR_KERNEL_MIN`).  Both are checked
-    against the loop reference ``tests/naive.py:factor_terms``.
+    against the loop reference ``tests/references/naive.py:factor_terms``.
     """
     L = np.ascontiguousarray(L, dtype=np.float64)
     T, J = L.shape[:2]

@@ -11,7 +11,7 @@ precision (:func:`_half`), so an in-between scale is within ``3 x 2^-11`` (relat
 lerp; the continuous certificate charges that (:func:`runtime.certify.factor_bounds`).  ``GfSlerp`` takes the **shortest arc** (it negates ``q1`` when ``q0 . q1 < 0``)
 and falls back to a linear blend when ``1 - |q0 . q1| <= 1e-5`` (the cosine from the float
 components of ``GfQuatf``), which it does not renormalise; :func:`_slerp` does exactly the same.  The shortest-arc behaviour is
-checked against usd-core in ``tests/test_kernels.py``.  A joint-local matrix is ``T R S`` (scale,
+checked against usd-core in ``tests/runtime/test_kernels.py``.  A joint-local matrix is ``T R S`` (scale,
 then rotate, then translate: ``UsdSkelMakeTransform``).
 """
 

@@ -12,7 +12,7 @@ may be anything (it is mapped to 0 and never read); a non-zero weight must name 
 ``[0, J)``.  The skinned point is ``sum_k w[v, k] * M[j[v, k]] @ (p[v], 1)``, exactly what
 ``UsdSkel.SkinPointsLBS`` computes (the weights are not renormalised; translations are weighted).
 
-Kernels (private) and their readable numpy reference ``tests/naive.py::naive_lbs``:
+Kernels (private) and their readable numpy reference ``tests/references/naive.py::naive_lbs``:
 
 * ``_lbs(v, f, points, ji, jw, m)``: one vertex (inlined into the loops below);
 * ``_skin_frames`` / ``_skin_frames_serial``: every vertex of every pose into ``(F, n, 3)``;

@@ -2,7 +2,7 @@
 
 Run from the repository root::
 
-    python -m tests.fuzz -n 300                     # what CI runs (tests/test_fuzz.py), ~1-2 min
+    python -m tests.fuzz -n 300                     # what CI runs (tests/cli/test_fuzz.py), ~1-2 min
     python -m tests.fuzz -n 10000 --out fuzz-cases  # a long campaign (make fuzz N=10000)
     python -m tests.fuzz --replay fuzz-cases/000123-internal-error  # one saved case again
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdSkel, Vt
 
-from usd_fixture import build_test_stage, open_copy, write_test_asset
+from references.usd_fixture import build_test_stage, open_copy, write_test_asset
 from colossus.validators import all_rules, check_asset
 
 MESH, SKEL, ROOT = "/Tube/Collider", "/Tube/Skeleton", "/Tube"
@@ -274,7 +274,7 @@ def b407(s):
     """Fails only between frames: ``bend`` swings mid and tip +-0.9 rad on alternate frames
     (straight half-way), centres moved off-axis, radii exactly as tight as the frames allow (the
     exact farthest vertex over every frame, from the proof run without its continuous part)."""
-    from usd_fixture import clip_locals
+    from references.usd_fixture import clip_locals
     from colossus.validators import frameproof as fp
     from colossus.validators.asset import LoadedAsset
 
@@ -297,7 +297,7 @@ BREAKERS = {int(name[1:]): fn for name, fn in globals().items() if name.startswi
 BREAKERS = {f"COL{k:03d}": v for k, v in BREAKERS.items()}
 #: Codes whose failing fixture is not an edited stage (files on disk, options, a crashing rule).
 SPECIAL = {"COL001", "COL002", "COL003", "COL102", "COL301",
-           "COL601", "COL602", "COL603", "COL604", "COL605"}  # --source: tests/test_validate_source.py
+           "COL601", "COL602", "COL603", "COL604", "COL605"}  # --source: tests/validators/test_validate_source.py
 
 
 def test_good_asset_is_clean(good_report):

@@ -9,5 +9,5 @@ compute.
 * :mod:`.fbx_truth` -- Maya's deformed meshes shipped with the ufbx test files.
 * :mod:`.compare` -- skins a colossus asset with plain usd-core and compares it with a reference.
 * :mod:`.diagnose` -- the command-line table over the corpus
-  (``.venv/bin/python -m tests.reference.diagnose``).
+  (``.venv/bin/python -m tests.references.diagnose``).
 """

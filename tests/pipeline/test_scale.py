@@ -15,9 +15,9 @@ from click.testing import CliRunner
 
 from colossus.pipeline.batch import output_names
 from colossus.pipeline.engine import expand_inputs, local_cluster
-from usd_fixture import open_copy
+from references.usd_fixture import open_copy
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "samples"
 
 

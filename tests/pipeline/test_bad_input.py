@@ -1,7 +1,7 @@
 """Bad input: exit 1 (2 for usage), one clear line naming the file, no traceback, no warning, no
 output left.  In process through click's CliRunner on the real ``colossus`` group (the statuses
 come from ``pipeline.cli.maps_errors``); ``capfd`` also catches anything a C library writes
-straight to the file descriptors.  tests/test_cli.py keeps one subprocess smoke test of the
+straight to the file descriptors.  tests/cli/test_cli.py keeps one subprocess smoke test of the
 installed entry point."""
 
 import json
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from conftest import ROOT, SAMPLES
+from paths import ROOT, SAMPLES
 
 #: Warning categories Python hides by default (what a user running ``colossus`` never sees).
 HIDDEN = (DeprecationWarning, PendingDeprecationWarning, ImportWarning, ResourceWarning)

@@ -57,7 +57,7 @@ import pytest  # noqa: E402
 from colossus.runtime.controller import STATES  # noqa: E402
 from colossus.runtime.script import CSV_COLUMNS, ScriptError, load_script, parse_script, run_script  # noqa: E402
 
-ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "docs" / "play-climb.json"
 
 

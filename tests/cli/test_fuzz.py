@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from conftest import SAMPLES
+from paths import SAMPLES
 from fuzz import mutators
 from fuzz.campaign import campaign
 from fuzz.seeds import source_seeds

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
 #: Modules of the optional extras: a runtime-only install has none of them.
 EXTRAS_MODULES = ("assimp_py", "scipy", "trimesh", "meshio", "fast_simplification", "pyvista", "vtk",

@@ -2,7 +2,7 @@
 downloads imports whole, moves as its format says, and passes its own validator.
 
 Each test names the corpus file whose quirk it shows; all skip cleanly when the corpus is absent.
-Motion against independent references is ``tests/test_reference_motion.py``; these check the
+Motion against independent references is ``tests/references/test_motion.py``; these check the
 structure the readers must get right (meshes, joints, clips, frames, counts, refusals).
 """
 
@@ -17,7 +17,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from paths import ROOT
 
 CORPUS = ROOT.parent / "shared" / "corpus"
 COLOSSUS = [sys.executable, "-m", "colossus"]
@@ -203,7 +203,7 @@ def test_off_grid_keys_state_their_error_bound(imported):
     """Fox forced to --fps 30: its keys (on 24 and 120 fps) fall between frames.  Each clip states
     a resampling error bound that holds against the independent glTF reference at every source
     key, is not loose by more than 30 %, and a bound over 1e-3 x size is a warning."""
-    from reference import compare
+    from references import compare
 
     from colossus.cli.import_ import format_summary
 

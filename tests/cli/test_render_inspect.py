@@ -18,8 +18,8 @@ import pytest
 from click.testing import CliRunner
 from PIL import Image
 
-from conftest import SAMPLES
-from usd_fixture import open_copy
+from paths import SAMPLES
+from references.usd_fixture import open_copy
 from colossus.cli.validate import validate_cmd
 from colossus.cli.inspect import inspect_cmd
 from colossus.cli.render import render_cmd
@@ -279,7 +279,7 @@ def test_validate_html_report(assets):
 
 # ------------------------------------------------------------------------------------ README
 def test_readme_inspect_example_and_picture(assets):
-    from conftest import ROOT
+    from paths import ROOT
 
     readme = (ROOT / "README.md").read_text()
     block = readme.split("$ colossus inspect out/creature.usda\n", 1)[1].split("```", 1)[0]

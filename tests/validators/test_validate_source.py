@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from pxr import Gf, Usd, Vt
 
-from conftest import ROOT, SAMPLES
+from paths import ROOT, SAMPLES
 from colossus.validators import check_asset
 
 

@@ -1,7 +1,7 @@
 """The frame proof judged by usd-core, on the real samples and on transformed fixtures.
 
 usd-core (``UsdSkel.SkinningQuery.ComputeSkinnedPoints`` + ``SkeletonQuery``, in
-``tests/usd_reference.py``) skins every frame of every clip; from its points alone we get, per
+``tests/references/usd_reference.py``) skins every frame of every clip; from its points alone we get, per
 (clip, frame, part), the farthest part vertex from the part's moving centre.  Against that:
 
 * the part spheres of the imported samples hold (no proof involved);
@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 from pxr import Vt
 
-from usd_fixture import open_copy
-from usd_reference import part_distances, tightest
+from references.usd_fixture import open_copy
+from references.usd_reference import part_distances, tightest
 from colossus.validators import check_asset
 
 ASSETS = {

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-import naive
-from conftest import SAMPLES
+from references import naive
+from paths import SAMPLES
 from colossus.pipeline.tolerances import model_scale
-from usd_reference import UsdSkelReference
+from references.usd_reference import UsdSkelReference
 
 FORMATS = ("glb", "fbx", "usda")
 MODELS = ("limb", "creature")
@@ -146,9 +146,9 @@ def test_imports_match_blender_usd_export(imported, model, ext):
 
 @pytest.fixture(scope="module")
 def gltf_reference():
-    """The glTF 2.0 specification evaluator (tests/reference/gltf_eval.py, no project code) on
+    """The glTF 2.0 specification evaluator (tests/references/gltf_eval.py, no project code) on
     each sample's .glb, loaded once per model."""
-    from reference.compare import GltfReference
+    from references.compare import GltfReference
     cache = {}
     return lambda model: cache.setdefault(model, GltfReference(SAMPLES / f"{model}.glb"))
 
@@ -160,7 +160,7 @@ def test_imports_match_gltf_spec_evaluator(imported, gltf_reference, model, ext)
     one): the glTF spec evaluator on the sample's .glb, at every key and every mid-key instant,
     against each import (the .fbx and .usda exports are the same Blender scene).  Measured:
     4.1e-6 x size at worst (the creature's roar between frames), 1.3e-6 at keys."""
-    from reference.compare import compare
+    from references.compare import compare
 
     _, out = imported(model, ext)
     rep = compare(SAMPLES / f"{model}.glb", out, max_instants=0, reference=gltf_reference(model))
@@ -182,7 +182,7 @@ def test_imports_match_gltf_spec_evaluator(imported, gltf_reference, model, ext)
 def test_written_asset_animates_like_the_imported_mesh(imported, model, ext):
     """Writer consistency (not reader correctness, which the Blender reference above checks):
     usd-core skinning the written asset reproduces the in-memory mesh skinned by the readable
-    reference in tests/naive.py, on every frame of every clip."""
+    reference in tests/references/naive.py, on every frame of every clip."""
     result, out = imported(model, ext)
     m = result.mesh
     ref = UsdSkelReference(out)
@@ -225,7 +225,7 @@ def test_provenance_and_metadata(imported):
     from pxr import Usd, UsdGeom
 
     from colossus.pipeline.run import sha256_of
-    from conftest import SAMPLES
+    from paths import SAMPLES
 
     _, out = imported("creature", "fbx")
     stage = Usd.Stage.Open(str(out))
@@ -249,7 +249,7 @@ def test_several_meshes_merged_or_chosen(tmp_path):
 
     from pxr import Gf, Sdf, Usd
 
-    from conftest import SAMPLES
+    from paths import SAMPLES
     from colossus.pipeline.run import ImportSettings, import_asset
 
     src = tmp_path / "two_limbs.usda"

@@ -12,7 +12,7 @@ import numpy as np
 from click.testing import CliRunner
 from scipy.spatial import cKDTree
 
-from conftest import SAMPLES
+from paths import SAMPLES
 
 #: Every command, in the README's order (``colossus --help`` lists every command).
 COMMANDS = ("import", "validate", "inspect", "render", "play", "bench")

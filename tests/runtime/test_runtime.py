@@ -10,29 +10,9 @@ from pxr import Usd, Vt
 from colossus.runtime import ColliderError, SphereContacts, SurfacePoints, load_collider
 from colossus.runtime import kernels as K
 from colossus.runtime.collider import PARALLEL_RAYS
-from test_runtime_naive import (closest_point_on_triangles, naive_raycast, naive_skin,
+from references.naive_queries import (closest_point_on_triangles, naive_raycast, naive_skin,
                                 naive_sphere_contacts, ray_triangles)
-from usd_reference import UsdSkelReference, read_parts
-
-
-@pytest.fixture(scope="session")
-def creature_path(imported):
-    return imported("creature", "glb")[1]
-
-
-@pytest.fixture(scope="session")
-def limb_path(imported):
-    return imported("limb", "glb")[1]
-
-
-@pytest.fixture(scope="session")
-def creature(creature_path):
-    return load_collider(creature_path)
-
-
-@pytest.fixture(scope="session")
-def limb(limb_path):
-    return load_collider(limb_path)
+from references.usd_reference import UsdSkelReference, read_parts
 
 
 #: Query test assets: the two samples with dominant parts (every face in one part) and imported
@@ -85,7 +65,7 @@ def test_bad_files(tmp_path, content):
 
 def test_verify_rejects_broken_asset(tmp_path, limb_path):
     """verify=require_passing raises on an asset the error rules reject; without it it still loads."""
-    from usd_fixture import open_copy
+    from references.usd_fixture import open_copy
     from colossus.validators import require_passing
     stage = open_copy(limb_path)  # never edit the layer the session's colliders share
     mesh = next(p for p in stage.Traverse() if p.GetTypeName() == "Mesh")
@@ -561,7 +541,7 @@ def _random_locals(col, rng, max_angle=np.pi):
 
 def _naive_points(col, local):
     """Skinned points of a joint-local pose with numpy only (column-vector, stage space)."""
-    import naive
+    from references import naive
 
     d = col.data
     skel = naive.compose(local[None], d.parents)[0]

@@ -1,7 +1,7 @@
 """The character controller (runtime.controller) on the samples' real colliders.
 
 Every motion is judged against an independent reference: the surface is skinned by plain
-usd-core (``UsdSkelReference``) and searched over ALL triangles in numpy (test_runtime_naive),
+usd-core (``UsdSkelReference``) and searched over ALL triangles in numpy (references/naive_queries.py),
 never through the runtime's own posing or queries.
 """
 
@@ -17,31 +17,11 @@ from colossus.runtime.controller import (FALLING, HANGING, HOLDING, SLIDING, STA
                                 Intent, carry_point, resolve_push)
 from colossus.runtime.controller import _along
 from colossus.runtime.script import start_position
-from usd_reference import UsdSkelReference
-from test_runtime_naive import (closest_point_on_triangles, inside_closed_mesh, naive_along,
+from references.usd_reference import UsdSkelReference
+from references.naive_queries import (closest_point_on_triangles, inside_closed_mesh, naive_along,
                                 naive_carry, naive_push, naive_raycast)
 
 RATE = 60.0  # controller steps per second
-
-
-@pytest.fixture(scope="module")
-def creature_path(imported):
-    return imported("creature", "glb")[1]
-
-
-@pytest.fixture(scope="module")
-def limb_path(imported):
-    return imported("limb", "glb")[1]
-
-
-@pytest.fixture(scope="module")
-def creature(creature_path):
-    return load_collider(creature_path)
-
-
-@pytest.fixture(scope="module")
-def limb(limb_path):
-    return load_collider(limb_path)
 
 
 class Reference:

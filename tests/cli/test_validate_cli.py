@@ -10,10 +10,10 @@ from xml.etree import ElementTree as ET
 import pytest
 from click.testing import CliRunner
 
-from usd_fixture import open_copy, write_test_asset
+from references.usd_fixture import open_copy, write_test_asset
 from colossus.cli.validate import validate_cmd
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")

@@ -2,9 +2,9 @@
 
 Run from the repository root::
 
-    .venv/bin/python -m tests.reference.diagnose                 # every corpus character
-    .venv/bin/python -m tests.reference.diagnose realworld/godot_mannequiny.glb --clips
-    .venv/bin/python -m tests.reference.diagnose --all-instants   # every key and mid-key
+    .venv/bin/python -m tests.references.diagnose                 # every corpus character
+    .venv/bin/python -m tests.references.diagnose realworld/godot_mannequiny.glb --clips
+    .venv/bin/python -m tests.references.diagnose --all-instants   # every key and mid-key
 
 Each file is imported with the contract's command line (``colossus import SRC -o OUT.usda``, the
 ``colossus`` next to this Python), into a temporary folder; the written asset is then skinned by
@@ -134,7 +134,7 @@ def summary_table(reports) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m tests.reference.diagnose", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m tests.references.diagnose", description=__doc__.split("\n\n")[0])
     ap.add_argument("files", nargs="*", help="corpus files (relative to the corpus folder, or paths); default: all")
     ap.add_argument("--clips", action="store_true", help="also print one row per clip")
     ap.add_argument("--all-instants", action="store_true", help="compare at every key and mid-key (default: at most 40 per clip)")

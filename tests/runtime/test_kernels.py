@@ -1,5 +1,5 @@
 """The one skinning kernel, UsdSkel's interpolation and the sound bounds (runtime.kernels,
-runtime.certify), against readable numpy references (tests/naive.py) and usd-core."""
+runtime.certify), against readable numpy references (tests/references/naive.py) and usd-core."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 from pxr import Gf, Usd, UsdSkel, Vt
 from scipy.spatial.transform import Rotation
 
-import naive
+from references import naive
 from colossus.runtime import certify as C
 from colossus.runtime.asset import ClipData
 from colossus.runtime.kernels import bounds as B

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import naive
-import synth
+from references import naive
+from references import synth
 from colossus.cli import main
 from colossus.pipeline.errors import UsageError
 from colossus.pipeline.geometry.collapse import apply_collapses, interior_vertices
@@ -26,7 +26,7 @@ from colossus.pipeline.geometry.surface_distance import (cover_radius, deviation
                                                 sample_distances)
 from colossus.pipeline.stages.simplify import _collapses, _shells, deviation, mesh_poses, parse_max_deviation, simplify
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CORPUS = ROOT.parent / "shared" / "corpus"
 
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from pxr import Gf, Usd, UsdSkel, Vt
 
-from usd_fixture import build_test_stage, clip_skel, naive_skin
-from usd_reference import part_distances, tightest
+from references.usd_fixture import build_test_stage, clip_skel, naive_skin
+from references.usd_reference import part_distances, tightest
 from colossus.validators import frameproof as fp
 from colossus.validators.asset import LoadedAsset
 
@@ -27,34 +27,6 @@ def _random_rig(rng, n=300, b=6, k=4, f=5):
     m[..., :3, :3] += 0.3 * rng.normal(size=(f, b, 3, 3))
     m[..., :3, 3] = rng.normal(size=(f, b, 3))
     return pts, ji, jw, m
-
-
-def test_skin_frames_matches_numpy_reference():
-    rng = np.random.default_rng(1)
-    pts, ji, jw, m = _random_rig(rng)
-    got = fp.skin_frames(pts, ji, jw, m)
-    ref = naive_skin(pts, ji, jw, m, np.eye(4)[None].repeat(m.shape[1], 0))
-    assert got.dtype == np.float32 and got.shape == ref.shape
-    np.testing.assert_allclose(got, ref, atol=1e-5)
-
-
-def test_part_farthest_matches_numpy_reference():
-    rng = np.random.default_rng(2)
-    pts, ji, jw, m = _random_rig(rng)
-    poff = np.array([0, 10, 10, 200])
-    pv = rng.choice(len(pts), size=200, replace=True).astype(np.int32)
-    centers = rng.normal(size=(m.shape[0], 3, 3))
-    d, v = fp.part_farthest(pts, ji, jw, m, poff, pv, centers)
-    sk = naive_skin(pts, ji, jw, m, np.eye(4)[None].repeat(m.shape[1], 0))
-    for f in range(m.shape[0]):
-        for p in range(3):
-            verts = pv[poff[p]:poff[p + 1]]
-            if len(verts) == 0:
-                assert d[f, p] == 0 and v[f, p] == -1
-                continue
-            dist = np.linalg.norm(sk[f, verts] - centers[f, p], axis=1)
-            assert d[f, p] == pytest.approx(dist.max(), abs=1e-5)
-            assert np.linalg.norm(sk[f, v[f, p]] - centers[f, p]) == pytest.approx(dist.max(), abs=1e-5)
 
 
 def test_wrappers_validate_inputs():
