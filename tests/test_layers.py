@@ -207,3 +207,16 @@ def test_graph_sees_every_module(pkg):
     names = [m for m in mods if m == pkg or m.startswith(pkg + ".")]
     assert len(names) >= 4
     assert sum(len(edges[m]) for m in names) >= 4
+
+
+def test_no_test_module_imports_another():
+    """Shared test code lives in tests/references (independent references and fixtures' builders),
+    tests/paths.py and conftest.py fixtures: no module imports a ``test_*`` module or a conftest."""
+    bad = []
+    for f in sorted((ROOT / "tests").rglob("*.py")):
+        for node in ast.walk(ast.parse(f.read_text(), filename=str(f))):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module] if isinstance(node, ast.ImportFrom) and node.module else [])
+            bad += [f"{f.relative_to(ROOT)}:{node.lineno} imports {n}" for n in names
+                    if n.split(".")[-1].startswith("test_") or n.split(".")[-1] == "conftest"]
+    assert not bad, "\n".join(bad)
