@@ -44,6 +44,10 @@ def _stage_line(rep) -> str:
                 f"{c['negligible_dropped']} negligible")
     if s == "parts":
         return f"{c['parts']} parts ({c['mode']}), {len(c.get('folded_joints', []))} joints folded"
+    if s == "quantize":
+        k = f", root scale x{c['root_scale']:g} onto the Skeleton" if c["root_scale"] != 1.0 else ""
+        return (f"{c['clips']} clips as stored (float3, quatf, half3){k}; moves a vertex "
+                f"<= {c['storage_error_relative']:.2g} x size")
     if s == "spheres":
         return f"max radius {_num(c['max_radius'], '.4g')}, max slack x{_num(c['max_slack_ratio'], '.3f')}"
     if s == "simplify":

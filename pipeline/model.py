@@ -145,6 +145,12 @@ class SkinnedMesh:
         Provenance: file name, format, reader notes.
     parts : Parts or None
         Collision parts, once the ``parts`` stage has run.
+    stored_clips : tuple of runtime.schema.Clip
+        Once the ``quantize`` stage has run: each clip exactly as the asset stores it (TRS,
+        rounded to the stored types, the roots without ``root_scale``), what the spheres are
+        proven on and what ``write`` writes; empty before.
+    root_scale : float
+        The roots' common scale ``k`` (``quantize``), which the writer puts on the Skeleton prim.
     """
 
     positions: np.ndarray
@@ -162,6 +168,8 @@ class SkinnedMesh:
     time_codes_per_second: float = 24.0
     source: dict = field(default_factory=dict)
     parts: Parts | None = None
+    stored_clips: tuple = ()
+    root_scale: float = 1.0
 
     def __post_init__(self):
         conv = {
@@ -185,6 +193,9 @@ class SkinnedMesh:
         _check(self.up_axis in ("Y", "Z"), "up_axis", "'Y' or 'Z'", self.up_axis)
         for c in self.clips:
             _check(c.local.shape[1] == b, f"clip {c.name!r} joint count", b, c.local.shape[1])
+        object.__setattr__(self, "stored_clips", tuple(self.stored_clips))
+        _check(not self.stored_clips or [c.name for c in self.stored_clips] == [c.name for c in self.clips],
+               "stored_clips", "none, or one per clip in order", [c.name for c in self.stored_clips])
 
     # -- convenience -------------------------------------------------------------------
     @property

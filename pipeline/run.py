@@ -23,11 +23,12 @@ from .stages.parts import parts
 from .stages.simplify import parse_max_deviation, simplify
 from .stages.spheres import spheres
 from .stages.weld import weld
-from .stages.write import check_output_path, stored_clips, write
+from .stages.quantize import quantize
+from .stages.write import check_output_path, write
 from .tolerances import LARGEST_COORDINATE, PARTS_ANY_THRESHOLD, RESAMPLING_RELATIVE
 from .xforms import degenerate
 
-STAGES = ("read", "bake", "weld", "orient", "bind", "simplify", "parts", "spheres", "write")
+STAGES = ("read", "bake", "weld", "orient", "bind", "simplify", "parts", "quantize", "spheres", "write")
 #: Stages that run only when asked for.
 OPTIONAL_STAGES = ("simplify",)
 
@@ -298,8 +299,9 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None, s
     if stop_after == "simplify":
         return mesh, reports
     mesh = step("parts", lambda: parts(mesh, s.parts, s.min_part_faces, s.parts_threshold))
-    # on the clips as the asset stores them (half-precision scales), so the spheres hold for it
-    mesh = step("spheres", lambda: spheres(stored_clips(mesh)))
+    # the spheres are proven on the clips exactly as the asset stores them (half-precision scales)
+    mesh = step("quantize", lambda: quantize(mesh))
+    mesh = step("spheres", lambda: spheres(mesh))
     return mesh, reports
 
 

@@ -13,31 +13,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import schema
+from .schema import Clip
 from .errors import ColliderError
 from .kernels.bounds import BoundData, bound_data
 
 PARTS = schema.PARTS_PREFIX
-
-
-@dataclass
-class ClipData:
-    """One ``SkelAnimation``: per-attribute sample times and values, as UsdSkel reads them.
-
-    ``tt/vt`` translations (nT,), (nT, A, 3); ``tr/vr`` rotations (nR,), (nR, A, 4) as
-    ``(x, y, z, w)``; ``ts/vs`` scales (nS,), (nS, A, 3); all float64. ``anim_to_skel`` (A,)
-    int64 maps the animation's joints to the skeleton's. ``times`` is the union of sample times.
-    """
-
-    name: str
-    path: str
-    tt: np.ndarray
-    vt: np.ndarray
-    tr: np.ndarray
-    vr: np.ndarray
-    ts: np.ndarray
-    vs: np.ndarray
-    anim_to_skel: np.ndarray
-    times: np.ndarray
 
 
 @dataclass
@@ -160,8 +140,8 @@ def _samples(attr, count, width, what):
     return np.asarray(times, dtype=np.float64), np.ascontiguousarray(arr)
 
 
-def read_clip(prim, joint_index) -> ClipData:
-    """One ``SkelAnimation`` prim as :class:`ClipData` (raises :class:`ColliderError`)."""
+def read_clip(prim, joint_index) -> Clip:
+    """One ``SkelAnimation`` prim as a :class:`runtime.schema.Clip` (raises :class:`ColliderError`)."""
     from pxr import UsdSkel
 
     anim = UsdSkel.Animation(prim)
@@ -178,7 +158,7 @@ def read_clip(prim, joint_index) -> ClipData:
     times = np.union1d(np.union1d(tt, tr), ts) if any(
         a.HasAuthoredValue() and a.GetNumTimeSamples() for a in
         (anim.GetTranslationsAttr(), anim.GetRotationsAttr(), anim.GetScalesAttr())) else np.zeros(0)
-    return ClipData(
+    return Clip(
         name=prim.GetName(), path=where,
         tt=tt, vt=np.ascontiguousarray(vt[:, keep]), tr=tr, vr=np.ascontiguousarray(vr[:, keep]),
         ts=ts, vs=np.ascontiguousarray(vs[:, keep]), anim_to_skel=amap[keep], times=times)
@@ -426,3 +406,7 @@ def _read(path) -> ColliderData:
         bounds=bounds, clips=clips, static_local_to_world=l2w,
         stage=stage if l2w is None else None,
     )
+
+
+#: The clip record's former name (one record now: :class:`runtime.schema.Clip`).
+ClipData = Clip

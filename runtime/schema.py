@@ -16,6 +16,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 #: Prefix of the per-part attributes on the collision mesh.
@@ -201,3 +203,40 @@ def face_owner(face_count: int, face_offsets, faces) -> np.ndarray:
     part_of = np.repeat(np.arange(len(face_offsets) - 1), np.diff(face_offsets))
     owner[faces[::-1]] = part_of[::-1]  # the first part wins
     return owner
+
+
+@dataclass
+class Clip:
+    """One clip, as UsdSkel stores it and as every part of colossus reads it: the one clip record
+    the importer's ``quantize`` stage makes, the writer writes, and the runtime's and the
+    validator's readers return (a ``SkelAnimation``).
+
+    Per-attribute sample times and values, all float64 (the values exactly as stored: float32
+    translations and rotations, half-precision scales, when they come from an asset or from the
+    ``quantize`` stage): ``tt/vt`` translations (nT,), (nT, A, 3); ``tr/vr`` rotations (nR,),
+    (nR, A, 4) as ``(x, y, z, w)``; ``ts/vs`` scales (nS,), (nS, A, 3).  ``anim_to_skel`` (A,)
+    int64 maps the animation's joints to the skeleton's.  ``times`` is the union of sample times
+    (the clip's frames).  ``name`` is the clip's name, ``path`` its prim path (or its name where
+    it has no prim yet).  Matrices are made from it only by the pose kernels
+    (:func:`runtime.kernels.pose.locals_at`).
+    """
+
+    name: str
+    path: str
+    tt: np.ndarray
+    vt: np.ndarray
+    tr: np.ndarray
+    vr: np.ndarray
+    ts: np.ndarray
+    vs: np.ndarray
+    anim_to_skel: np.ndarray
+    times: np.ndarray
+
+    @classmethod
+    def on_grid(cls, name: str, times, t, q, s, path: str | None = None) -> "Clip":
+        """A clip whose three attributes share the frames ``times`` (f,) and that animates every
+        joint of the skeleton in order: ``t`` (f, J, 3), ``q`` (f, J, 4), ``s`` (f, J, 3)."""
+        times = np.ascontiguousarray(times, dtype=np.float64)
+        f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)
+        return cls(name, name if path is None else path, times, f64(t), times, f64(q), times, f64(s),
+                   np.arange(np.shape(t)[1], dtype=np.int64), times)

@@ -46,9 +46,7 @@ from colossus.pipeline.geometry.minsphere import largest_min_sphere, min_sphere
 from colossus.pipeline.model import SkinnedMesh, Parts, skel_transforms
 from colossus.pipeline.stages import StageReport
 from colossus.pipeline.tolerances import SPHERE_PAD_RADIUS, SPHERE_PAD_RELATIVE, model_scale
-from colossus.pipeline.xforms import decompose_trs
 from colossus.runtime import certify
-from colossus.runtime.asset import ClipData
 from colossus.runtime.kernels import skin as SK
 from colossus.runtime.schema import part_vertex_csr
 
@@ -90,21 +88,6 @@ def slack_pose_indices(mesh: SkinnedMesh, per_clip: int = SLACK_FRAMES_PER_CLIP)
 GROWTH_DEPTH = 6
 
 
-def written_clip(clip, joint_count: int, roots=None, k: float = 1.0) -> ClipData:
-    """A pipeline clip as :class:`runtime.asset.ClipData`, rounded as ``stages.write`` stores it
-    (``decompose_trs``; translations and rotations float32, scales float16; the root joints
-    ``roots`` with the skeleton's common scale ``k`` taken out, :func:`pipeline.stages.write.root_scale`)."""
-    local = clip.local
-    if roots is not None and k != 1.0:
-        local = local.copy()
-        local[:, roots, :3, :] /= k
-    t, q, s = decompose_trs(local)
-    times = np.asarray(clip.times, dtype=np.float64)
-    f64 = (lambda a, dt: np.ascontiguousarray(np.asarray(a, dtype=dt).astype(np.float64)))
-    return ClipData(clip.name, clip.name, times, f64(t, np.float32), times, f64(q, np.float32), times,
-                    f64(s, np.float16), np.arange(joint_count, dtype=np.int64), times)
-
-
 def _round_up_f32(x: float) -> np.float32:
     r = np.float32(x)
     if float(r) < x:
@@ -117,7 +100,8 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
 
     Parameters
     ----------
-    mesh : SkinnedMesh with ``parts``.
+    mesh : SkinnedMesh with ``parts``, after ``quantize`` (its ``stored_clips`` are what the
+        certificate between frames runs on, as the validator will read them from the asset).
 
     Returns
     -------
@@ -131,6 +115,9 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     """
     if mesh.parts is None:
         raise ValueError("spheres: expected a mesh with parts (run the parts stage first), got parts=None")
+    if len(mesh.stored_clips) != len(mesh.clips):
+        raise ValueError("spheres: expected the clips as stored (run the quantize stage first), "
+                         f"got {len(mesh.stored_clips)} stored of {len(mesh.clips)} clips")
     parts_in = mesh.parts
     S, labels = pose_transforms(mesh)
     # A joint-space ball moved by a sheared joint transform (a parent's non-uniform stretch under a
@@ -216,8 +203,7 @@ def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
         return need
     voff, verts = part_vertex_csr(mesh.triangles, parts_in.face_offsets, parts_in.faces, mesh.vertex_count)
     # the rig exactly as the writer lays it out: the roots' common scale k on the Skeleton prim
-    from .write import root_scale
-    k = root_scale(mesh)
+    k = mesh.root_scale
     roots = mesh.parents < 0
     unscale = np.diag([1.0 / k, 1.0 / k, 1.0 / k, 1.0])
     rest = mesh.rest_transforms.copy()
@@ -226,13 +212,13 @@ def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
                       unscale @ mesh.bind_transforms, rest, mesh.parents, np.asarray(parts_in.joints),
                       centers.astype(np.float64), target, voff, verts, world=np.diag([k, k, k, 1.0]))
     start = 1  # pose 0 is the bind pose
-    for clip in mesh.clips:
+    for clip, stored in zip(mesh.clips, mesh.stored_clips, strict=True):
         n = clip.frame_count
         far = pose_far[start:start + n]
         start += n
         if n < 2:
             continue
-        c = certify.continuous(rig, written_clip(clip, mesh.joint_count, roots, k), clip.times, far,
+        c = certify.continuous(rig, stored, clip.times, far,
                                np.ones_like(far, bool), 0.0, 0.0, rho=target, growth=True,
                                max_depth=GROWTH_DEPTH, frame_bound_space="joint")
         # a J-space bound U certifies a radius r where U <= r * ratio (non-uniform scales on the

@@ -12,6 +12,7 @@ from references import synth
 from colossus.pipeline.geometry import min_sphere, min_spheres
 from colossus.pipeline.stages.orient import orient
 from colossus.pipeline.stages.parts import parts
+from colossus.pipeline.stages.quantize import quantize
 from colossus.pipeline.stages.spheres import pose_transforms, slack_pose_indices, spheres
 from colossus.runtime.kernels.skin import skin_frames
 from colossus.pipeline.stages.weld import weld, weld_maps
@@ -405,7 +406,7 @@ def test_skin_points_kernel_matches_reference():
 def test_spheres_contain_every_frame(mode):
     mesh, _ = parts(synth.make_tube(frames=6), mode=mode)
     snap = snapshot(mesh)
-    out, rep = spheres(mesh)
+    out, rep = spheres(quantize(mesh)[0])
     assert_unchanged(mesh, snap)
     P = out.parts
     assert P.centers.dtype == np.float32 and P.radii.dtype == np.float32
@@ -455,7 +456,7 @@ def test_spheres_hold_under_a_sheared_joint():
         bend[f, 1] = bend[f, 1] @ np.diag([1.0, 1.0 + 0.3 * f / 5, 1.0, 1.0])  # mid stretches along y
         bend[f, 2] = bend[f, 2] @ synth.rot("z", 0.8)                            # tip turned under it
     mesh = mesh.replace(clips=(Clip("bend", mesh.clip("bend").times, bend),))
-    out, _ = spheres(parts(mesh)[0])
+    out, _ = spheres(quantize(parts(mesh)[0])[0])
     S = naive.all_poses(out)
     skinned = naive.skin_points(out, S)
     lin = S[..., :3, :3]
@@ -495,16 +496,17 @@ def _stretched_tube(k=1.0, frames=9):
 @pytest.mark.parametrize("k", [1.0, 0.01])
 def test_stored_clips_error_within_its_bound_and_far_below_plain_rounding(k):
     """UsdSkel keeps scales as half3: rounding each joint's values on its own errs ~3e-4 of the
-    model down a stretched chain; storage with corrected translations (``stages.write._store_clip``)
+    model down a stretched chain; storage with corrected translations (``stages.quantize._store_clip``)
     errs a fraction of that and stays inside the bound it states, measured by the naive skinning
     reference on every frame."""
-    from colossus.pipeline.stages.write import stored_clips
     from colossus.pipeline.tolerances import model_scale
     from colossus.pipeline.xforms import compose_trs, decompose_trs
 
     mesh = _stretched_tube(k)
     mesh = mesh.replace(source={"clip_info": [{"name": c.name} for c in mesh.clips]})
-    stored = stored_clips(mesh)
+    stored, rep = quantize(mesh)
+    assert rep.stage == "quantize" and rep.counts["storage_error_relative"] == max(
+        i["storage_error_relative"] for i in stored.source["clip_info"])
     exact = naive.skin_points(mesh, naive.all_poses(mesh))
     size = model_scale(exact.reshape(-1, 3))
     got = naive.skin_points(stored, naive.all_poses(stored))
@@ -536,12 +538,12 @@ def test_stretched_chain_written_passes_the_continuous_certificate(tmp_path):
     radius ``r`` as ``r * s_lo / s_hi``; the spheres stage must grow by that ratio too, or the
     validator cannot certify what the import wrote (mannequiny's and lumberjack's stretched legs
     failed COL407 so)."""
-    from colossus.pipeline.stages.write import stored_clips, write
+    from colossus.pipeline.stages.write import write
     from colossus.validators import check_asset
 
     mesh = _stretched_tube(frames=7)
     mesh, _ = parts(mesh)
-    out, _ = spheres(stored_clips(mesh))
+    out, _ = spheres(quantize(mesh)[0])
     path = tmp_path / "stretched.usda"
     write(out, str(path))
     rep = check_asset(str(path))
