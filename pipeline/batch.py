@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import os
 
-from .engine import Engine, Progress, Task, crash_hook, expand_inputs, make_backend
+from .engine import Engine, Progress, Task, expand_inputs, make_backend
 from .errors import one_line
 from .readers import READERS
 
@@ -60,7 +60,6 @@ def _import_unit(src, out, settings):
     """Worker side of one batch import: never raises for a bad input."""
     from .errors import ColossusError
     from .run import import_asset
-    crash_hook(src)
     try:
         res = import_asset(src, out, settings)
     except ColossusError as e:

@@ -14,7 +14,6 @@ Command-agnostic and below both of its users (:mod:`pipeline.batch`, :mod:`valid
   shared the dying worker is not blamed twice), then hands the loss to the task's ``on_lost``;
   Ctrl-C cancels what is running and returns what finished (``engine.interrupted``);
 * :class:`Progress`: the stderr bar (assets done/total, failures so far);
-* :func:`crash_hook`: the worker-death test hook.
 
 Results are merged by the callers in input order, never in completion order, so a report is
 identical whichever backend made it (timing fields aside).
@@ -382,17 +381,3 @@ class Progress:
             self._bar = None
 
 
-def crash_hook(path):
-    """Test hook, for worker processes only (never the coordinator): die (``os._exit``) on every
-    unit of an asset whose path contains ``$COLOSSUS_TEST_CRASH``, and on the first unit only
-    (a marker file ``PATH.crashed`` remembers it) of one containing ``$COLOSSUS_TEST_CRASH_ONCE``."""
-    import multiprocessing as mp
-    path = os.fspath(path)
-    always, once = os.environ.get("COLOSSUS_TEST_CRASH"), os.environ.get("COLOSSUS_TEST_CRASH_ONCE")
-    if not (always or once) or mp.parent_process() is None:
-        return
-    if always and always in path:
-        os._exit(70)
-    if once and once in path and not os.path.exists(path + ".crashed"):
-        open(path + ".crashed", "w").close()
-        os._exit(70)

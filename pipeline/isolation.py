@@ -36,8 +36,8 @@ stall waits for the timeout as before.  Python's "this process is
 multi-threaded, use of fork() may lead to deadlocks" ``DeprecationWarning`` is silenced for that
 reason.  Where ``os.fork`` does not exist, or ``COLOSSUS_ISOLATE=0``, the call runs in-process.
 
-Test hook: ``COLOSSUS_TEST_CHILD_CRASH=segv|abort|exit|hang[:SUBSTRING]`` makes the child die by
-that means (before calling ``fn``) when its path contains ``SUBSTRING`` (any path if omitted).
+Tests inject faults by patching the function the child runs (``tests/faults.py``; a fork
+inherits the patch): no test switch is read here.
 """
 
 from __future__ import annotations
@@ -124,24 +124,6 @@ def _progress(pid: int):
         return fields[0].decode(), int(fields[11]) + int(fields[12])  # utime + stime
     except (OSError, ValueError, IndexError):
         return None
-
-
-def _test_hook(path: str) -> None:
-    spec = os.environ.get("COLOSSUS_TEST_CHILD_CRASH")
-    if not spec:
-        return
-    how, _, needle = spec.partition(":")
-    if needle and needle not in path:
-        return
-    if how == "segv":
-        os.kill(os.getpid(), signal.SIGSEGV)
-    elif how == "abort":
-        os.abort()
-    elif how == "exit":
-        os._exit(3)
-    elif how == "hang":
-        while True:
-            time.sleep(1)
 
 
 def _exception_payload(e: BaseException):
@@ -234,7 +216,6 @@ def _child(out_fd: int, err_fd: int, fn, args, kwargs, path: str, memory: int | 
                 cap = min(cap, hard)
             if soft == resource.RLIM_INFINITY or cap < soft:
                 resource.setrlimit(resource.RLIMIT_DATA, (cap, hard))
-        _test_hook(path)
         with warnings.catch_warnings(record=True) as caught:
             try:
                 payload = ("ok", fn(*args, **kwargs))

@@ -28,7 +28,7 @@ import json
 import os
 from dataclasses import dataclass, field
 
-from colossus.pipeline.engine import Engine, InlineBackend, Progress, Task, crash_hook, expand_inputs, make_backend
+from colossus.pipeline.engine import Engine, InlineBackend, Progress, Task, expand_inputs, make_backend
 from colossus.pipeline.isolation import ChildFailed, contained
 from colossus.pipeline.readers import USD_EXTENSIONS
 
@@ -43,7 +43,6 @@ PROOF_RULES = ("COL403", "COL404", "COL407")
 
 # ------------------------------------------------------------------------------ work units
 def unit_check(path, kw):
-    crash_hook(path)
     return check_asset(path, **kw)
 
 
@@ -114,7 +113,6 @@ def unit_check_contained(path, kw):
 
 
 def unit_plan(path, kw):
-    crash_hook(path)
     from .asset import LoadedAsset, open_stage
     try:
         asset = LoadedAsset(open_stage(path), path)
@@ -129,7 +127,6 @@ def unit_plan(path, kw):
 
 
 def unit_clip(path, clip, kw):
-    crash_hook(path)
     from .asset import LoadedAsset, open_stage
     from .frameproof import prove
     asset = LoadedAsset(open_stage(path), path)
@@ -138,7 +135,6 @@ def unit_clip(path, clip, kw):
 
 
 def unit_finish(path, kw, proofs):
-    crash_hook(path)
     return check_asset(path, clip_proofs=proofs, **kw)
 
 

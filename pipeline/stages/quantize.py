@@ -178,7 +178,8 @@ def _as_stored(t, q, s):
     put in one hemisphere."""
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     f32 = lambda a: a.astype(np.float32).astype(np.float64)
-    return f32(t), _one_hemisphere(f32(q)), s.astype(np.float16).astype(np.float64)
+    # (+ 0.0: no negative zero in the file)
+    return f32(t) + 0.0, _one_hemisphere(f32(q)) + 0.0, s.astype(np.float16).astype(np.float64) + 0.0
 
 
 def quantize(mesh: SkinnedMesh):

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+import faults
 from paths import ROOT, SAMPLES
 
 #: Warning categories Python hides by default (what a user running ``colossus`` never sees).
@@ -278,7 +279,8 @@ COLOSSUS = [sys.executable, "-m", "colossus"]
 def test_native_crash_in_reader_is_one_line(work, run_import, monkeypatch, how, signame):
     """A real native crash (the child kills itself with the signal) becomes the usual one-line
     exit-1 error naming the file; the command itself survives to say so."""
-    monkeypatch.setenv("COLOSSUS_TEST_CHILD_CRASH", how)
+    from colossus.pipeline import isolation
+    monkeypatch.setattr(isolation, "_read_in_child", faults.dying(isolation._read_in_child, how))
     out = work / "o.usda"
     assert_clean_failure(run_import(SAMPLES / "limb.glb", out), out, f"limb.glb: the reader crashed on it ({signame})")
 
@@ -286,15 +288,22 @@ def test_native_crash_in_reader_is_one_line(work, run_import, monkeypatch, how, 
 def test_native_crash_in_reader_real_process(work):
     """The same through the installed entry point's real exit path (a process of its own)."""
     out = work / "o.usda"
-    proc = subprocess.run(COLOSSUS + ["import", str(SAMPLES / "limb.glb"), "-o", str(out)], capture_output=True,
-                          text=True, timeout=300, env={**os.environ, "COLOSSUS_TEST_CHILD_CRASH": "segv"})
+    code = ("import sys, faults\n"
+            "from colossus.pipeline import isolation\n"
+            "isolation._read_in_child = faults.dying(isolation._read_in_child, 'segv')\n"
+            "from colossus.cli import main\n"
+            "main(sys.argv[1:], prog_name='colossus')\n")
+    proc = subprocess.run([sys.executable, "-c", code, "import", str(SAMPLES / "limb.glb"), "-o", str(out)],
+                          capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "PYTHONPATH": str(ROOT / "tests")})
     assert proc.returncode == 1 and not os.path.exists(out)
     assert proc.stderr.splitlines() == [f"error: {SAMPLES / 'limb.glb'}: the reader crashed on it (SIGSEGV); "
                                         "corrupt or hostile file?"], proc.stderr
 
 
 def test_hanging_reader_times_out(work, run_import, monkeypatch):
-    monkeypatch.setenv("COLOSSUS_TEST_CHILD_CRASH", "hang")
+    from colossus.pipeline import isolation
+    monkeypatch.setattr(isolation, "_read_in_child", faults.dying(isolation._read_in_child, "hang"))
     monkeypatch.setenv("COLOSSUS_READ_TIMEOUT", "3")
     out = work / "o.usda"
     assert_clean_failure(run_import(SAMPLES / "limb.glb", out), out, "limb.glb: reading it took more than 3 s")
@@ -536,10 +545,12 @@ def validate_json(colossus):
 
 def test_validate_native_crash_is_col001_and_others_checked(good_assets, tmp_path, validate_json, monkeypatch):
     """--jobs 1 reads a crate asset in a contained child first: a native crash of usd-core on
-    it (here the test hook) is that asset's COL001; the next asset is still checked."""
+    it (here a patched probe that kills its child) is that asset's COL001; the next asset is still
+    checked."""
+    from colossus.validators import parallel
     bad = tmp_path / "hostile.usdc"
     shutil.copy(good_assets[".usdc"], bad)
-    monkeypatch.setenv("COLOSSUS_TEST_CHILD_CRASH", "segv:hostile")
+    monkeypatch.setattr(parallel, "_probe", faults.dying(parallel._probe, "segv", "hostile"))
     proc, (rb, rg) = validate_json(bad, good_assets[".usda"])
     assert proc.returncode == 1
     assert [f["code"] for f in rb["findings"]] == ["COL001"] and "crashed reading it (SIGSEGV)" in rb["findings"][0]["message"]

@@ -54,10 +54,10 @@ def lib(tmp_path_factory, imported):
 
 @pytest.fixture(scope="module")
 def cluster():
-    """A 2-worker LocalCluster whose workers die (os._exit) on assets named *crashme* always and
-    on *crashonce* the first time (the test hook in ``pipeline.engine.crash_hook``)."""
+    """A 2-worker LocalCluster; its workers can import the tests' fault injectors (``faults``,
+    which die on assets named *crashme* always and on *crashonce* the first time)."""
     needs_dask()
-    c = local_cluster(2, env={"COLOSSUS_TEST_CRASH": "crashme", "COLOSSUS_TEST_CRASH_ONCE": "crashonce"})
+    c = local_cluster(2, env={"PYTHONPATH": str(ROOT / "tests")})
     yield c
     c.close()
 
@@ -183,7 +183,16 @@ def _check_crash_report(d, stdout):
             assert a == b
 
 
-def test_cluster_worker_death_retried_once_then_a_finding(crashlib, cluster):
+def _dying_units(monkeypatch):
+    """The validators' work units replaced by ones that kill their worker (tests/faults.py)."""
+    import faults
+    from colossus.validators import parallel
+    for name, fn in faults.WORKER_UNITS.items():
+        monkeypatch.setattr(parallel, name, fn)
+
+
+def test_cluster_worker_death_retried_once_then_a_finding(crashlib, cluster, monkeypatch):
+    _dying_units(monkeypatch)
     r = validate(crashlib, "--format", "json", "--scheduler", cluster.scheduler_address, "--split-above", "0")
     assert r.exit_code == 1, r.output
     _check_crash_report(crashlib, r.stdout)
@@ -191,8 +200,7 @@ def test_cluster_worker_death_retried_once_then_a_finding(crashlib, cluster):
 
 
 def test_process_pool_worker_death_retried_once_then_a_finding(crashlib, monkeypatch):
-    monkeypatch.setenv("COLOSSUS_TEST_CRASH", "crashme")
-    monkeypatch.setenv("COLOSSUS_TEST_CRASH_ONCE", "crashonce")
+    _dying_units(monkeypatch)
     r = validate(crashlib, "--format", "json", "--jobs", "2")
     assert r.exit_code == 1, r.output
     _check_crash_report(crashlib, r.stdout)
