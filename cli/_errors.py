@@ -18,11 +18,15 @@ EXTRA_OF = {"assimp_py": "pipeline", "scipy": "pipeline", "trimesh": "pipeline",
             "distributed": "dask", "embreex": "bench", "rtree": "bench"}
 
 
+#: (command, module) -> a smaller extra that brings the module for that command
+EXTRA_FOR_COMMAND = {("validate", "scipy"): "validate", ("inspect", "scipy"): "validate"}
+
+
 def missing_extra(e: ModuleNotFoundError, command: str | None = None) -> CommandError | None:
     """The one-line error (exit 2: this install cannot run it) for a command that needs an optional
     extra that is not installed; None when ``e`` is not about one."""
     name = (e.name or "").split(".")[0]
-    extra = EXTRA_OF.get(name)
+    extra = EXTRA_FOR_COMMAND.get((command, name), EXTRA_OF.get(name))
     if extra is None:
         return None
     what = f"colossus {command}" if command else "this command"

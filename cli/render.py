@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import click
 
-from colossus.cli._errors import maps_errors
+from colossus.cli._errors import maps_errors, missing_extra
 from colossus.runtime.errors import ColossusError, one_line
 
 SUFFIXES = (".png", ".gif")
@@ -70,6 +70,11 @@ def render_cmd(path, output, clip, time_, size, max_frames, source):
             failing = sum(bool(p.failing.any()) for p in ps)
     except ColossusError:
         raise
+    except ModuleNotFoundError as e:  # an install without the render extra
+        err = missing_extra(e, "render")
+        if err is None:
+            raise RenderError(f"could not draw on this machine: {one_line(e)}") from None
+        raise err from None
     except Exception as e:  # the renderer itself (no OpenGL context, ...): the contract's status 2
         raise RenderError(f"could not draw on this machine: {one_line(e)}") from None
     unit = "frame" if suffix == ".gif" else "part"
