@@ -32,9 +32,12 @@ from collections import deque
 from concurrent.futures import Future
 
 from .errors import UsageError, one_line
+from .tempfiles import is_temp
 
 #: A glob is an input that does not exist as written and contains one of these.
 GLOB_CHARS = "*?["
+#: Directory levels a directory input or a glob's directory is walked down at most.
+MAX_WALK_DEPTH = 64
 
 #: Scheduler-side setting used for clusters colossus starts itself (``--scheduler local:N``):
 #: the scheduler does not retry a task whose worker died; the engine's own single, isolated
@@ -66,10 +69,22 @@ def expand_inputs(items, suffixes, exclude=()):
         return not any(a.startswith(e) for e in excl)
 
     def walk(d):
-        found = []
+        # a symlinked directory is not entered (os.walk's default), a directory reached twice
+        # (bind mounts, hard-linked trees) is walked once, and the depth is bounded: no loop hangs
+        found, seen = [], set()
+        base = os.path.abspath(d).rstrip(os.sep).count(os.sep)
         for root, dirs, files in os.walk(d):
+            try:
+                st = os.stat(root)
+            except OSError:
+                dirs[:] = []
+                continue
+            if (st.st_dev, st.st_ino) in seen or os.path.abspath(root).count(os.sep) - base >= MAX_WALK_DEPTH:
+                dirs[:] = []
+                continue
+            seen.add((st.st_dev, st.st_ino))
             dirs.sort()
-            found += [os.path.join(root, f) for f in files if f.lower().endswith(suffixes)]
+            found += [os.path.join(root, f) for f in files if f.lower().endswith(suffixes) and not is_temp(f)]
         return sorted(p for p in found if keep(p))
 
     files, missing = [], []
@@ -80,17 +95,82 @@ def expand_inputs(items, suffixes, exclude=()):
         elif os.path.exists(item):
             files.append(item)
         elif is_glob(item):
-            matches = sorted(glob.glob(item, recursive=True))
+            matches = _glob(item)
             if not matches:
                 missing.append(item)
             for m in matches:
                 if os.path.isdir(m):
                     files += walk(m)
-                elif m.lower().endswith(suffixes) and keep(m):
+                elif m.lower().endswith(suffixes) and keep(m) and not is_temp(m):
                     files.append(m)
         else:
             missing.append(item)
     return files, missing
+
+
+def _glob(pattern: str) -> list:
+    """Sorted matches of ``pattern`` (``**`` spans directories, as ``glob.glob(recursive=True)``;
+    names starting with a dot match only a pattern component that does too).  A ``**`` pattern is
+    matched by walking its fixed prefix folder without entering symlinked directories, each
+    directory once and at most :data:`MAX_WALK_DEPTH` deep: glob's own recursion follows symlinks
+    and a symlink loop makes it run for ever."""
+    if "**" not in pattern:
+        return sorted(glob.glob(pattern))
+    import re
+
+    def component(part):  # one path component: * and ? stay inside it
+        out, i = "", 0
+        while i < len(part):
+            c = part[i]
+            if c == "*":
+                out += "[^/]*"
+            elif c == "?":
+                out += "[^/]"
+            elif c == "[" and "]" in part[i + 2:] or part[i + 1:i + 2] == "]" and "]" in part[i + 2:]:
+                j = part.index("]", i + 2) if part[i + 1:i + 2] in ("!", "]") else part.index("]", i + 1)
+                inner = part[i + 1:j]
+                inner = "^" + inner[1:] if inner.startswith("!") else inner
+                out += "[" + inner.replace("\\", "\\\\") + "]"
+                i = j
+            else:
+                out += re.escape(c)
+            i += 1
+        return out
+
+    parts = pattern.split(os.sep)
+    k = next(i for i, part in enumerate(parts) if any(c in part for c in GLOB_CHARS))
+    base = os.sep.join(parts[:k]) or ("." if not pattern.startswith(os.sep) else os.sep)
+    rx = ""
+    for i, part in enumerate(parts[k:]):
+        last = i == len(parts) - k - 1
+        if part == "**":
+            rx += "(?:[^/.][^/]*(?:/|$))*"
+        else:
+            body = component(part)
+            if not part.startswith("."):
+                body = "(?![.])" + body
+            rx += body + ("" if last else "/")
+    want = re.compile(rx + r"\Z", re.S)
+    out, seen = [], set()
+    start = os.path.abspath(base).rstrip(os.sep).count(os.sep)
+    for root, dirs, files in os.walk(base):
+        try:
+            st = os.stat(root)
+        except OSError:
+            dirs[:] = []
+            continue
+        if (st.st_dev, st.st_ino) in seen or os.path.abspath(root).count(os.sep) - start >= MAX_WALK_DEPTH:
+            dirs[:] = []
+            continue
+        seen.add((st.st_dev, st.st_ino))
+        rel = os.path.relpath(root, base)
+        rel = "" if rel == "." else rel.replace(os.sep, "/") + "/"
+        for name in dirs + files:
+            if want.match(rel + name):
+                out.append(os.path.join(rel, name) if base == "." else os.path.join(root, name))
+    if len(parts) - k == 1 and parts[-1] == "**" and base != ".":
+        out.append(os.path.join(base, ""))  # glob's "dir/**" names the folder itself too
+    return sorted(set(out))
 
 
 # ------------------------------------------------------------------------------ backends

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from colossus.pipeline.tempfiles import write_atomic
 from colossus.runtime.errors import ColossusError
 
 from colossus.validators import frameproof as fp
@@ -427,29 +428,11 @@ def png_bytes(img: np.ndarray, colors: int | None = 256) -> bytes:
     return buf.getvalue()
 
 
-def _write_atomic_bytes(path, data: bytes):
-    import tempfile
-
-    d = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".colossus-", suffix=".tmp", dir=d)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def render_png(asset, out, clip=None, time=None, size=(800, 600), source: SourceMesh | None = None) -> Pose:
     """Write a PNG of the bind pose or ``clip`` at ``time`` (with ``source`` drawn faint
     behind); returns the pose drawn."""
     pose = pose_at(asset, clip, time, source)
-    _write_atomic_bytes(out, png_bytes(render_image(asset, pose, size, source)))
+    write_atomic(out, png_bytes(render_image(asset, pose, size, source)))
     return pose
 
 
@@ -486,5 +469,5 @@ def render_gif(asset, out, clip=None, size=(480, 360), max_frames=60, source: So
             frames.append(im.quantize(colors=128, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE))
     buf = io.BytesIO()
     frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:], duration=ms, loop=0)
-    _write_atomic_bytes(out, buf.getvalue())
+    write_atomic(out, buf.getvalue())
     return ps

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from xml.etree import ElementTree as ET
 
 from .findings import SEVERITY_RANK, summary_line
@@ -147,14 +146,7 @@ FORMATS = {"text": format_text, "json": format_json, "junit": format_junit}
 
 
 def write_atomic(path: str, text: str) -> None:
-    """Write ``text`` to ``path`` via a temporary file in the same directory and a rename."""
-    d = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".colossus-", suffix=".tmp", dir=d)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    """Write the report ``text`` to ``path`` atomically (:func:`colossus.pipeline.tempfiles.write_atomic`)."""
+    from colossus.pipeline.tempfiles import write_atomic as _write
+
+    _write(path, text)

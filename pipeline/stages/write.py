@@ -19,13 +19,13 @@ a partial asset behind, and nothing usd-core cannot open is ever written.
 from __future__ import annotations
 
 import os
-import tempfile
 
 import numpy as np
 
 from colossus.runtime import schema
 
 from ..errors import OutputError
+from ..tempfiles import clean_stale, temp_path
 from ..model import SkinnedMesh
 from . import StageReport
 
@@ -67,8 +67,8 @@ def check_output_path(out_path) -> str:
     if os.path.isdir(out):
         raise OutputError(f"{out}: is a directory")
     try:  # probe for real: access() says yes to root even where writing fails
-        fd, probe = tempfile.mkstemp(prefix=".colossus-", suffix=".probe", dir=folder)
-        os.close(fd)
+        probe = temp_path(folder, ".probe")
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
         os.unlink(probe)
     except OSError as exc:
         raise OutputError(f"{out}: output directory {folder} is not writable ({exc.strerror or exc})") from None
@@ -106,7 +106,8 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
     folder = os.path.dirname(os.path.abspath(out))
     from pxr import Tf
 
-    tmp = os.path.join(folder, f".colossus-{os.getpid()}-{os.urandom(4).hex()}{ext}")
+    clean_stale(folder)  # what a killed write left here
+    tmp = temp_path(folder, ext)
     try:
         stage = Usd.Stage.CreateNew(tmp)
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if mesh.up_axis == "Y" else UsdGeom.Tokens.z)
