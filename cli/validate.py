@@ -10,7 +10,7 @@ import sys
 
 import click
 
-from colossus.cli._errors import maps_errors
+from colossus.cli._errors import CommandError, maps_errors
 
 
 def _codes(values):
@@ -101,6 +101,8 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
         click.echo(f"error: --source {source}: no such file", err=True)
         click.get_current_context().exit(2)
     split_bytes = _size(split_above)
+    if output:
+        _check_report_path(output)  # before any asset is read: exit 2, one line
     show = sys.stderr.isatty() if progress is None else progress
     res = check_many(paths, jobs=jobs, scheduler=scheduler, progress=show, split_bytes=split_bytes,
                      select=sel, ignore=ign, severities=sev, max_influences=max_influences,
@@ -120,12 +122,35 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
     else:
         text = render_report(fmt, reports, verbose=verbose, unchecked=unchecked)
     if output:
-        write_atomic(output, text)
+        try:
+            write_atomic(output, text)
+        except OSError as e:  # a full or read-only disk: the environment, not the assets (exit 2)
+            raise CommandError(f"cannot write the report {output}: {e.strerror or e}", 2) from None
     else:
         click.echo(text, nl=False)
     unreadable = bool(missing) or any(f.code == "COL003" for r in reports for f in r.findings)
     status = 130 if res.interrupted else 2 if unreadable else 0 if all(r.passed for r in reports) else 1
     click.get_current_context().exit(status)
+
+
+def _check_report_path(output) -> None:
+    """Exit 2 with one line unless the report ``output`` can be written (its folder exists, is
+    writable for real, and ``output`` is not a folder)."""
+    import os
+
+    from colossus.pipeline.tempfiles import temp_path
+
+    folder = os.path.dirname(os.path.abspath(output))
+    if os.path.isdir(output):
+        raise CommandError(f"cannot write the report {output}: is a directory", 2)
+    if not os.path.isdir(folder):
+        raise CommandError(f"cannot write the report {output}: no folder {folder}", 2)
+    probe = temp_path(folder, ".probe")
+    try:  # access() says yes to root on a read-only filesystem: try for real
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        os.unlink(probe)
+    except OSError as e:
+        raise CommandError(f"cannot write the report {output}: {e.strerror or e}", 2) from None
 
 
 def _size(text):

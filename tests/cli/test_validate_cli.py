@@ -151,3 +151,16 @@ def test_every_rule_has_what_why_example():
         for label in ("What:", "Why:", "Example:"):
             assert label in r.doc, (r.code, label)
         assert r.summary and r.name and r.severity in ("error", "warning", "info")
+
+
+@pytest.mark.parametrize("where", ["sys", "missing-folder"])
+def test_unwritable_report_is_exit_2_before_any_check(lib, tmp_path, where):
+    """``-o`` where nothing can be written (a read-only or permission-less filesystem: /sys for
+    root too; a folder that does not exist) is the environment, not the
+    assets: exit 2, one line naming the report, nothing written, no "internal error"."""
+    out = {"sys": "/sys/colossus-report.json", "missing-folder": str(tmp_path / "no" / "r.json")}[where]
+    r = CliRunner().invoke(validate_cmd, [str(lib / "good.usda"), "--format", "json", "-o", out])
+    assert r.exit_code == 2, r.output
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: cannot write the report {out}: "), r.stderr
+    assert r.stdout == "" and not os.path.exists("/sys/colossus-report.json")
