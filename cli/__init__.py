@@ -24,7 +24,7 @@ import click
 
 from colossus._version import __version__
 
-from ._errors import CommandError, maps_errors, missing_extra  # noqa: F401  (the commands' shared error mapping)
+from ._errors import CommandError, maps_errors, missing_extra, on_sigterm  # noqa: F401  (the commands' shared error mapping)
 
 #: name -> (module, attribute, one-line help shown by ``colossus --help``)
 COMMANDS = {
@@ -84,6 +84,12 @@ def main():
     colossus import creature.glb -o creature.usda     # build a collider asset
     colossus validate creature.usda                   # prove it holds on every frame
     """
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        # SIGTERM (a CI job's timeout) is handled like Ctrl-C: what finished is reported, exit 143
+        signal.signal(signal.SIGTERM, on_sigterm)
 
 
 if __name__ == "__main__":  # pragma: no cover

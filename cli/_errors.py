@@ -22,6 +22,27 @@ EXTRA_OF = {"assimp_py": "pipeline", "scipy": "pipeline", "trimesh": "pipeline",
 EXTRA_FOR_COMMAND = {("validate", "scipy"): "validate", ("inspect", "scipy"): "validate"}
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, handled like Ctrl-C (what finished is reported) but with its own status, 143."""
+
+
+def on_sigterm(signum, frame):  # installed by the command group for every command
+    note_terminated()
+    raise Terminated()
+
+
+def interrupted_status(exc: BaseException | None = None) -> int:
+    """130 for Ctrl-C, 143 for SIGTERM (128 + the signal number, as a shell reports them)."""
+    return 143 if isinstance(exc, Terminated) or _TERMINATED[0] else 130
+
+
+_TERMINATED = [False]
+
+
+def note_terminated() -> None:
+    _TERMINATED[0] = True
+
+
 def missing_extra(e: ModuleNotFoundError, command: str | None = None) -> CommandError | None:
     """The one-line error (exit 2: this install cannot run it) for a command that needs an optional
     extra that is not installed; None when ``e`` is not about one."""
@@ -55,7 +76,8 @@ def maps_errors(input_status: int = 1):
       an unwritable output) -> ``input_status`` (1 for ``import``; 2 for ``inspect``/``render``,
       whose contract says an unreadable asset is status 2);
     * a missing optional extra (:data:`EXTRA_OF`) -> 2, naming the extra to install;
-    * ``MemoryError`` -> 1 "out of memory"; Ctrl-C -> 130 "interrupted";
+    * ``MemoryError`` -> 1 "out of memory"; Ctrl-C -> 130 "interrupted"; SIGTERM -> 143
+      "terminated" (:func:`on_sigterm`);
     * anything else -> 1 "internal error (...)" with no traceback (``COLOSSUS_DEBUG=1`` shows it).
 
     click's own exits and usage errors pass through untouched.
@@ -75,8 +97,9 @@ def maps_errors(input_status: int = 1):
                 raise CommandError(one_line(e, limit=600), input_status) from None
             except MemoryError:
                 raise CommandError("out of memory", 1) from None
-            except KeyboardInterrupt:
-                raise CommandError("interrupted", 130) from None
+            except KeyboardInterrupt as e:
+                status = interrupted_status(e)
+                raise CommandError("terminated" if status == 143 else "interrupted", status) from None
             except Exception as e:  # never a traceback on user input
                 if isinstance(e, ModuleNotFoundError):  # an optional extra this install lacks
                     ctx = click.get_current_context(silent=True)

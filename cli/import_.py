@@ -8,7 +8,7 @@ import sys
 
 import click
 
-from colossus.cli._errors import maps_errors
+from colossus.cli._errors import interrupted_status, maps_errors
 from colossus.pipeline.errors import OutputError, UsageError
 from colossus.pipeline.tolerances import PARTS_ANY_THRESHOLD
 
@@ -268,4 +268,4 @@ def _import_many(srcs, out, settings, as_json, progress, jobs, scheduler):
     for r in rows:
         if r["ok"] is False:
             click.echo(f"error: {r['source']}: {r['error']}", err=True)
-    click.get_current_context().exit(130 if interrupted else 0 if all(r["ok"] for r in rows) else 1)
+    click.get_current_context().exit(interrupted_status() if interrupted else 0 if all(r["ok"] for r in rows) else 1)

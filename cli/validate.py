@@ -10,7 +10,7 @@ import sys
 
 import click
 
-from colossus.cli._errors import CommandError, maps_errors
+from colossus.cli._errors import CommandError, interrupted_status, maps_errors
 
 
 def _codes(values):
@@ -129,7 +129,7 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
     else:
         click.echo(text, nl=False)
     unreadable = bool(missing) or any(f.code == "COL003" for r in reports for f in r.findings)
-    status = 130 if res.interrupted else 2 if unreadable else 0 if all(r.passed for r in reports) else 1
+    status = interrupted_status() if res.interrupted else 2 if unreadable else 0 if all(r.passed for r in reports) else 1
     click.get_current_context().exit(status)
 
 

@@ -178,9 +178,13 @@ class WorkerLost(RuntimeError):
     """The process running a task died (or was killed) before returning."""
 
 
-def _worker_init(numba_threads):
-    """Pool workers: Ctrl-C is the coordinator's to handle, and the compiled kernels share the
-    cores with the other workers instead of each taking all of them."""
+def _worker_init(numba_threads, parent=0):
+    """Pool workers: Ctrl-C is the coordinator's to handle, they die with the coordinator (a
+    killed command leaves no worker behind), and the compiled kernels share the cores with the
+    other workers instead of each taking all of them."""
+    if parent:
+        from .isolation import die_with_parent
+        die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.environ.setdefault("NUMBA_NUM_THREADS", str(numba_threads))
 
@@ -232,7 +236,7 @@ class ProcessBackend:
         if self._ex is not None:
             self._ex.shutdown(wait=False, cancel_futures=True)
         self._ex = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("spawn"),
-                                       initializer=_worker_init, initargs=(_share(self.workers),))
+                                       initializer=_worker_init, initargs=(_share(self.workers), os.getpid()))
         self._gen += 1
 
     def submit(self, fn, *args):

@@ -196,14 +196,32 @@ def _load(fh):
     return pickle.loads(main, buffers=buffers)
 
 
-def _child(out_fd: int, err_fd: int, fn, args, kwargs, path: str, memory: int | None) -> None:
+def die_with_parent(parent_pid: int) -> None:
+    """Tie this process's life to its parent's: on Linux the kernel sends it SIGKILL when the
+    parent dies (``prctl(PR_SET_PDEATHSIG)``), whatever kills the parent (SIGKILL included); and if
+    the parent ``parent_pid`` is already gone, exit now.  Elsewhere only the second check runs."""
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+
+def _child(out_fd: int, err_fd: int, fn, args, kwargs, path: str, memory: int | None, parent: int = 0) -> None:
     """The child's whole life: never returns (``os._exit``).  The pickled answer goes to the file
     ``out_fd`` (one write, no pipe ping-pong with the parent: on a loaded machine each 64 KiB
     pipe round trip costs a scheduling delay); the parent learns it is done when the child's end
     of the pipe closes, at exit."""
     code = 0
     try:
+        if parent:
+            die_with_parent(parent)  # a killed command leaves no reader behind
         signal.signal(signal.SIGINT, signal.SIG_DFL)  # Ctrl-C: the parent handles it, the child just dies
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
         os.dup2(err_fd, 2)
         os.dup2(err_fd, 1)  # a library printing to stdout must not corrupt the command's own output (--json)
         import faulthandler
@@ -296,7 +314,7 @@ def _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch):
             # a copy-on-write page fault in the child: freeze them out of its view, and do not
             # collect in the short-lived child at all
             gc.freeze()
-            pid = -1
+            pid, parent = -1, os.getpid()
             try:
                 pid = os.fork()
             except OSError:  # no process to spare (EAGAIN, ENOMEM): read here, uncontained
@@ -312,7 +330,7 @@ def _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch):
         if pid == 0:  # pragma: no cover - the child (coverage does not follow it)
             gc.disable()
             os.close(read_fd)
-            _child(out.fileno(), err.fileno(), fn, args, kwargs, path, memory)
+            _child(out.fileno(), err.fileno(), fn, args, kwargs, path, memory, parent)
         os.close(write_fd)
         status, reason = None, None
         still = (None, time.monotonic())  # (last CPU ticks seen, since when)
