@@ -175,6 +175,9 @@ def _source_lines(read_rep, mesh=None) -> list:
 @click.option("--max-deviation", default=None, metavar="D",
               help="Simplify while the proxy stays within D of the full skinned mesh on every frame "
                    "(stage units, or D% of the model size).")
+@click.option("--allow-outside-references", is_flag=True,
+              help="Let the source reference files outside its own folder (absolute paths, '..'); "
+                   "refused by default. Only regular files are ever read.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--progress/--no-progress", default=None,
               help="Show a progress bar on stderr (default: for large inputs on a terminal).")
@@ -185,7 +188,7 @@ def _source_lines(read_rep, mesh=None) -> list:
 @maps_errors(input_status=1)
 def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, parts_mode, parts_threshold,
                min_part_faces, meshes, fps, source_up_axis, source_meters_per_unit, target_faces, max_deviation,
-               as_json, progress, jobs, scheduler):
+               allow_outside_references, as_json, progress, jobs, scheduler):
     """Import the Blender export SRC and write the collider asset OUT.
 
     \b
@@ -210,6 +213,7 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
         parts_threshold=parts_threshold, meshes=list(meshes), fps=fps,
         source_up_axis=source_up_axis.upper() if source_up_axis else None,
         source_meters_per_unit=source_meters_per_unit, target_faces=target_faces, max_deviation=max_deviation,
+        allow_outside_references=allow_outside_references,
     )
     from colossus.pipeline.engine import is_glob
     from colossus.pipeline.stages.write import OUTPUT_EXTENSIONS

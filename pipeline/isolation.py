@@ -390,16 +390,19 @@ def _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch):
 
 
 # ------------------------------------------------------------------------------ readers
-def _read_in_child(path, meshes, fps, limit_mib):
+def _read_in_child(path, meshes, fps, limit_mib, allow_outside=False):
+    from colossus.runtime.references import allowing_outside
+
     from .readers import read
     try:
-        return read(path, meshes=meshes, fps=fps)
+        with allowing_outside(allow_outside):
+            return read(path, meshes=meshes, fps=fps)
     except MemoryError:
         raise InputError(path, f"reading it needs more memory than the {limit_mib:.0f} MiB a file of its size "
                          "may use (corrupt or hostile file?)") from None
 
 
-def read_isolated(path, meshes=None, fps=None):
+def read_isolated(path, meshes=None, fps=None, allow_outside=False):
     """:func:`pipeline.readers.read` in a contained child: the same result or the same
     :class:`~pipeline.errors.InputError`; a native crash, a runaway allocation or a hang of the
     reader becomes an ``InputError`` naming the file too.
@@ -422,7 +425,8 @@ def read_isolated(path, meshes=None, fps=None):
     except ValueError:
         timeout = READ_TIMEOUT
     try:
-        return contained(_read_in_child, p, meshes, fps, memory / 2**20, path=p, timeout=timeout, memory=memory)
+        return contained(_read_in_child, p, meshes, fps, memory / 2**20, allow_outside, path=p, timeout=timeout,
+                         memory=memory)
     except ChildFailed as e:
         if e.timed_out:
             raise InputError(p, f"reading it took more than {timeout:g} s (corrupt or hostile file?)") from None

@@ -50,6 +50,8 @@ class ImportSettings:
     source_meters_per_unit: float | None = None
     target_faces: int | None = None
     max_deviation: str | None = None
+    #: follow the source's references out of its folder (regular files only; runtime.references)
+    allow_outside_references: bool = False
 
     @property
     def proxy(self) -> bool:
@@ -218,6 +220,8 @@ def settings_from_provenance(settings: dict) -> ImportSettings:
             out[k] = [m for m in str(v).split(", ") if m] if not isinstance(v, (list, tuple)) else list(v)
         elif v == "" or v is None:
             out[k] = None if default is None else default
+        elif isinstance(default, bool):
+            out[k] = v if isinstance(v, bool) else str(v).lower() in ("1", "true", "yes")
         elif isinstance(default, float) or k in ("fps", "source_meters_per_unit"):
             out[k] = float(v)
         elif isinstance(default, int):
@@ -233,7 +237,7 @@ def read_baked(src, settings: ImportSettings | None = None) -> SkinnedMesh:
     a contained child and checked like import's read, so a hostile source is one InputError."""
     s = settings or ImportSettings()
     s.check()
-    m = read_isolated(src, meshes=s.meshes or None, fps=s.fps)
+    m = read_isolated(src, meshes=s.meshes or None, fps=s.fps, allow_outside=s.allow_outside_references)
     if s.source_up_axis or s.source_meters_per_unit:
         m = m.replace(up_axis=s.source_up_axis or m.up_axis,
                       meters_per_unit=s.source_meters_per_unit or m.meters_per_unit)
@@ -266,7 +270,7 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None, s
         return out[0]
 
     def do_read():
-        m = read_isolated(src, meshes=s.meshes or None, fps=s.fps)  # a native crash: one InputError
+        m = read_isolated(src, meshes=s.meshes or None, fps=s.fps, allow_outside=s.allow_outside_references)  # a native crash: one InputError
         if s.source_up_axis or s.source_meters_per_unit:
             m = m.replace(up_axis=s.source_up_axis or m.up_axis,
                           meters_per_unit=s.source_meters_per_unit or m.meters_per_unit)

@@ -263,6 +263,14 @@ def _read(path) -> ColliderData:
         raise ColliderError(f"not a readable USD file ({' '.join(str(e).split())[:200]})") from None
     if layer is None:
         raise ColliderError("not a readable USD file")
+    from .references import layer_references
+    try:
+        refs = layer_references(path)
+    except Exception:
+        refs = []
+    if refs:  # a collider is one self-contained layer: nothing it names is opened
+        raise ColliderError(f"names other files (a collider has no composition arcs), not read: {refs[0]!r}"
+                            + (f" and {len(refs) - 1} more" if len(refs) > 1 else ""))
     stage = Usd.Stage.Open(layer, load=Usd.Stage.LoadAll)
     if stage is None:
         raise ColliderError("not a readable USD stage")

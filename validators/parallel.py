@@ -68,6 +68,9 @@ def _probe(path):
     from colossus.pipeline.errors import one_line
 
     from .asset import CLIP_ATTRS, LoadedAsset, open_stage
+    from .runner import external_references
+    if external_references(path):
+        return None  # check_asset reports COL004 without opening the stage
     try:
         stage = open_stage(path)
     except Exception as e:

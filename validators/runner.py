@@ -139,6 +139,12 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
             add("COL003", f"{path} does not exist or is not a readable file")
             report.sort()
             return report
+        refs = external_references(path)
+        if refs:  # read from the layer alone: nothing it names is opened
+            shown = ", ".join(repr(r) for r in refs[:5]) + (f" (+{len(refs) - 5} more)" if len(refs) > 5 else "")
+            add("COL004", f"names {len(refs)} other file(s), not read: {shown}")
+            report.sort()
+            return report
         try:
             stage = open_stage(path)
         except Exception as e:  # usd-core raises Tf.ErrorException and friends
@@ -197,6 +203,17 @@ def unreadable_report(path, message: str, select=None, ignore=None, severities=N
         report.findings.append(_finding("COL001", message, severities))
     report.sort()
     return report
+
+
+def external_references(path) -> list:
+    """The asset paths the layer ``path`` names (:func:`runtime.references.layer_references`), or
+    ``[]`` when the layer cannot be parsed (opening it then reports COL001)."""
+    from colossus.runtime.references import layer_references
+
+    try:
+        return layer_references(path)
+    except Exception:
+        return []
 
 
 def require_passing(path) -> AssetReport:

@@ -94,12 +94,12 @@ class _File:
                     raw = base64.b64decode(uri.split(",", 1)[1])
                 except (IndexError, ValueError):
                     raise InputError(path, f"buffer {i}: data URI is not valid base64") from None
-            else:
-                from urllib.parse import unquote
-                ext_path = os.path.join(os.path.dirname(os.path.abspath(path)), unquote(uri))
+            else:  # a file beside it: checked before it is opened (runtime.references)
+                from colossus.runtime.references import OutsideReference, open_regular, resolve
                 try:
-                    with open(ext_path, "rb") as fh:
-                        raw = fh.read()
+                    raw = open_regular(resolve(path, uri, f"buffer {i}"))
+                except OutsideReference as e:
+                    raise InputError(path, str(e)) from None
                 except OSError:
                     raise InputError(path, f"buffer {i}: external file {uri!r} cannot be read") from None
             if len(raw) < int(b.get("byteLength", 0)):

@@ -37,8 +37,49 @@ def _m44(values) -> np.ndarray:
     return np.swapaxes(a.reshape(-1, 4, 4), -1, -2) if a.ndim != 2 else a.T
 
 
+#: Layers a source's composition may bring in at most (a bound on the walk of :func:`_check_arcs`).
+MAX_LAYERS = 1000
+
+
+def _check_arcs(path) -> None:
+    """Refuse, before anything is composed, a source whose sublayers, references, payloads or
+    value clips name a file outside its folder, a FIFO, a device or a directory
+    (:mod:`runtime.references`; ``--allow-outside-references`` lifts the folder rule).  Each
+    referenced layer is read with ``Sdf`` alone and checked the same way, recursively.  Members of
+    a ``.usdz`` package are inside it by construction: only absolute paths, URIs and '..' escapes
+    are refused there."""
+    from pxr import Tf
+
+    from colossus.runtime.references import OutsideReference, layer_references, resolve
+
+    todo, seen = [os.path.abspath(path)], set()
+    while todo:
+        layer = todo.pop()
+        if layer in seen:
+            continue
+        seen.add(layer)
+        if len(seen) > MAX_LAYERS:
+            raise InputError(path, f"its composition names more than {MAX_LAYERS} layers")
+        try:
+            refs = layer_references(layer, composition_only=True)
+        except Tf.ErrorException:
+            if layer == os.path.abspath(path):
+                return  # the stage's own open reports it
+            raise InputError(path, f"a layer it references cannot be read: {os.path.basename(layer)}") from None
+        packaged = layer.lower().endswith(".usdz")
+        for ref in refs:
+            what = f"layer {os.path.basename(layer)!r} references" if layer != os.path.abspath(path) else "reference"
+            if packaged and not (os.path.isabs(ref) or ".." in ref.replace("\\", "/").split("/") or ":" in ref.split("/")[0]):
+                continue
+            try:
+                todo.append(resolve(layer, ref, what))
+            except OutsideReference as e:
+                raise InputError(path, str(e)) from None
+
+
 def _open(path):
     from pxr import Tf, Usd
+    _check_arcs(path)
     try:
         stage = Usd.Stage.Open(path, Usd.Stage.LoadAll)
     except Tf.ErrorException as exc:  # one_line: usd-core's reason only, cut, even if not UTF-8

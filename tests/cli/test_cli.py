@@ -25,7 +25,7 @@ def colossus(*args):
 
 
 def entry_point():
-    """The installed console script, else ``python -m pipeline.cli``."""
+    """The installed console script, else ``python -m colossus``."""
     script = Path(sys.executable).with_name("colossus")
     return [str(script)] if script.exists() else [sys.executable, "-m", "colossus"]
 

@@ -19,7 +19,7 @@ from fuzz.seeds import source_seeds
 #: replays with ``python -m tests.fuzz --seed 12 --start I -n 1``.
 CI_CASES = 320
 CI_SEED = 12
-#: Every this-many-th import case runs as a real ``python -m pipeline.cli`` subprocess.
+#: Every this-many-th import case runs as a real ``python -m colossus`` subprocess.
 CI_SUBPROCESS_EVERY = 40
 
 

@@ -142,7 +142,7 @@ def test_jobs_in_parallel_processes(lib):
 def test_rules_doc_is_current():
     from colossus.validators.catalog import render
     doc = (ROOT / "docs" / "rules.md").read_text()
-    assert doc == render(), "docs/rules.md is stale: run `python -m validators.catalog > docs/rules.md`"
+    assert doc == render(), "docs/rules.md is stale: run `python -m colossus.validators.catalog > docs/rules.md`"
 
 
 def test_every_rule_has_what_why_example():

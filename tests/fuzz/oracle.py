@@ -19,7 +19,7 @@ The rules (issue 12; the contract's "one line, exit 1, nothing written"):
 
 Cases run in-process through click's ``CliRunner`` (fast: no interpreter start per case) with
 warnings recorded and file descriptor 2 redirected to a file, so native output is seen too; a
-sample runs as a real ``python -m pipeline.cli`` subprocess, the path users take.
+sample runs as a real ``python -m colossus`` subprocess, the path users take.
 """
 
 from __future__ import annotations

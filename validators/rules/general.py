@@ -20,3 +20,13 @@ rule("COL003", "path-missing", "error",
      doc="""What: the path does not exist or cannot be read.
 Why: a CI job that gates a path that is not there is misconfigured; `colossus validate` exits 2.
 Example: `colossus validate assets/typo.usda`.""")(None)
+
+rule("COL004", "external-reference", "error",
+     "The asset names another file (a sublayer, reference, payload or value clip): a collider is one self-contained layer.",
+     doc="""What: the asset's layer names an asset path: a sublayer, a reference or payload to another file, a
+value clip, an asset-valued attribute.  They are read from the layer alone (`Sdf`), nothing is composed,
+and the asset is not opened any further: no file it names is ever read.
+Why: an asset colossus writes has no composition arcs; one that has them was changed after the import,
+and what it would pull in (`/etc/passwd`, a FIFO that blocks the reader for ever, another asset) is not
+what was validated.  `colossus validate` runs on untrusted pull requests.
+Example: `subLayers = [@/dev/zero@]`; `references = @../other.usda@</Boss>`.""")(None)

@@ -1,0 +1,162 @@
+"""A file never makes us read outside what it may reference (issue 26, items 1-2).
+
+Each case is built at test time and run as a real command: it ends in well under 10 s, with the
+documented exit status, exactly one stderr line (nothing of usd-core's), no output file, and
+nothing outside the file's folder read (a FIFO with no writer would block any read of it for
+ever; /dev/zero never ends)."""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import subprocess
+import sys
+import time
+
+import pytest
+
+from paths import SAMPLES
+
+COLOSSUS = [sys.executable, "-m", "colossus"]
+
+
+def run(*args, timeout=60):
+    t0 = time.monotonic()
+    p = subprocess.run(COLOSSUS + [str(a) for a in args], capture_output=True, text=True, timeout=timeout)
+    p.seconds = time.monotonic() - t0
+    return p
+
+
+def assert_refused(p, out, needle, status=1):
+    assert p.seconds < 10, p.seconds
+    assert p.returncode == status, (p.returncode, p.stderr)
+    lines = p.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and needle in lines[0], p.stderr
+    assert not os.path.exists(out)
+
+
+def _gltf_with_buffer(folder, uri):
+    """The limb sample as a .gltf whose one buffer is ``uri``; its bytes as a .bin beside it."""
+    data = (SAMPLES / "limb.glb").read_bytes()
+    n = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + n])
+    binary = data[20 + n + 8:]
+    (folder / "limb.bin").write_bytes(binary)
+    doc["buffers"][0]["uri"] = uri
+    src = folder / "limb.gltf"
+    src.write_text(json.dumps(doc))
+    return src, binary
+
+
+@pytest.fixture()
+def outside(tmp_path):
+    d = tmp_path / "outside"
+    d.mkdir()
+    return d
+
+
+@pytest.mark.parametrize("case", ["absolute", "dotdot", "symlink-out", "fifo", "dev-zero", "directory", "file-uri"])
+def test_gltf_buffer_outside_or_not_a_file_is_refused(tmp_path, outside, case):
+    src_dir = tmp_path / "src"
+    src_dir.mkdir()
+    _, binary = _gltf_with_buffer(src_dir, "limb.bin")
+    (outside / "limb.bin").write_bytes(binary)
+    uri, needle = {
+        "absolute": (str(outside / "limb.bin"), "an absolute path"),
+        "dotdot": ("../outside/limb.bin", "leaves the file's folder"),
+        "symlink-out": ("link.bin", "leaves the file's folder"),
+        "fifo": ("fifo.bin", "is a FIFO"),
+        "dev-zero": ("/dev/zero", "an absolute path"),
+        "directory": ("sub", "is a directory"),
+        "file-uri": ("file://" + str(outside / "limb.bin"), "a URI"),
+    }[case]
+    if case == "symlink-out":
+        os.symlink(outside / "limb.bin", src_dir / "link.bin")
+    if case == "fifo":
+        os.mkfifo(src_dir / "fifo.bin")
+    if case == "directory":
+        (src_dir / "sub").mkdir()
+    src, _ = _gltf_with_buffer(src_dir, uri)
+    out = tmp_path / "o.usda"
+    assert_refused(run("import", src, "-o", out), out, needle)
+
+
+def test_fifo_is_refused_even_when_outside_references_are_allowed(tmp_path):
+    os.mkfifo(tmp_path / "fifo.bin")
+    src, _ = _gltf_with_buffer(tmp_path, "fifo.bin")
+    out = tmp_path / "o.usda"
+    assert_refused(run("import", src, "-o", out, "--allow-outside-references"), out, "is a FIFO")
+
+
+def test_allow_outside_references_reads_a_real_buffer(tmp_path, outside):
+    """The legitimate case: an absolute path to a real buffer imports with the opt-in."""
+    _, binary = _gltf_with_buffer(outside, "limb.bin")
+    src_dir = tmp_path / "src"
+    src_dir.mkdir()
+    src, _ = _gltf_with_buffer(src_dir, str(outside / "limb.bin"))
+    (src_dir / "limb.bin").unlink()
+    out = tmp_path / "o.usda"
+    p = run("import", src, "-o", out, "--allow-outside-references")
+    assert p.returncode == 0 and out.exists(), p.stderr
+
+
+def _usd_with(path, sublayers=(), reference=None):
+    from pxr import Sdf
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    layer.subLayerPaths[:] = list(sublayers)
+    if reference is not None:
+        prim = Sdf.PrimSpec(layer, "X", Sdf.SpecifierDef)
+        prim.referenceList.Prepend(Sdf.Reference(reference))
+    text = layer.ExportToString()
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("case", ["etc-passwd", "dev-zero", "fifo", "outside", "self"])
+def test_usd_source_sublayer_is_checked_before_composing(tmp_path, outside, case):
+    """``import`` of a USD source checks every arc before the stage is composed."""
+    src = tmp_path / "src.usda"
+    (outside / "o.usda").write_text("#usda 1.0\n")
+    if case == "fifo":
+        os.mkfifo(tmp_path / "f.usda")
+    sub = {"etc-passwd": "/etc/passwd", "dev-zero": "/dev/zero", "fifo": "f.usda", "outside": "../outside/o.usda",
+           "self": "src.usda"}[case]
+    _usd_with(src, [sub])
+    out = tmp_path / "o.usda"
+    p = run("import", src, "-o", out)
+    needle = {"etc-passwd": "an absolute path", "dev-zero": "an absolute path", "fifo": "is a FIFO",
+              "outside": "leaves the file's folder", "self": "src.usda"}[case]
+    assert_refused(p, out, needle)
+
+
+@pytest.mark.parametrize("case", ["sublayer-outside", "reference-outside", "payload-outside", "sublayer-fifo",
+                                  "sublayer-dev-zero", "self"])
+def test_validate_judges_the_asset_as_written(imported, tmp_path, outside, case):
+    """A collider has no composition arcs: any named file is COL004 (exit 1), read from the layer
+    alone; the FIFO or /dev/zero is never opened (validate ends at once)."""
+    from pxr import Sdf
+    _, good = imported("limb", "glb")
+    asset = tmp_path / "a.usda"
+    layer = Sdf.Layer.OpenAsAnonymous(str(good))
+    (outside / "o.usda").write_text("#usda 1.0\n")
+    if case == "sublayer-fifo":
+        os.mkfifo(tmp_path / "f.usda")
+    target = {"sublayer-outside": str(outside / "o.usda"), "reference-outside": "../outside/o.usda",
+              "payload-outside": "../outside/o.usda", "sublayer-fifo": "f.usda", "sublayer-dev-zero": "/dev/zero",
+              "self": "a.usda"}[case]
+    if case.startswith("sublayer") or case == "self":
+        layer.subLayerPaths.append(target)
+    else:
+        spec = Sdf.PrimSpec(layer, "Extra", Sdf.SpecifierDef)
+        arcs = spec.referenceList if case.startswith("reference") else spec.payloadList
+        arcs.Prepend(Sdf.Reference(target) if case.startswith("reference") else Sdf.Payload(target))
+    asset.write_text(layer.ExportToString())
+    p = run("validate", asset, "--format", "json")
+    assert p.seconds < 10 and p.returncode == 1, (p.returncode, p.stderr)
+    assert p.stderr == "", p.stderr
+    (rep,) = json.loads(p.stdout)["assets"]
+    assert [f["code"] for f in rep["findings"]] == ["COL004"] and target in rep["findings"][0]["message"]
+    from colossus.runtime import ColliderError, load_collider
+    with pytest.raises(ColliderError, match="names other files"):
+        load_collider(asset)
