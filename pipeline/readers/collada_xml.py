@@ -18,6 +18,8 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
+from ..errors import InputError
+
 
 def _local(tag: str) -> str:
     return tag.rsplit("}", 1)[-1]
@@ -31,13 +33,35 @@ def _floats(text) -> np.ndarray:
     return np.array((text or "").split(), dtype=np.float64)
 
 
+def _parse(path):
+    """The file's XML root.  assimp's own reading of a Collada file differs from the file where this
+    reader corrects it (vertex order of skins, clip names), so a file this reader cannot parse is
+    refused, never silently left to assimp: a DTD with entities (never expanded: external or
+    billion-laughs entities are a hostile file's), or XML that does not parse.  An unreadable
+    file is left to the caller (its open fails the same way)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16)
+    except OSError:
+        return None
+    if b"<!ENTITY" in head or (b"<!DOCTYPE" in head and b"[" in head.split(b"<!DOCTYPE", 1)[1].split(b">", 1)[0]):
+        raise InputError(path, "its XML declares DTD entities; they are never expanded (hostile XML?), so it is not read")
+    try:
+        return ET.parse(path).getroot()
+    except ET.ParseError as e:
+        raise InputError(path, f"its Collada XML does not parse ({e}); assimp's reading of it would not be "
+                         "corrected, so it is not read") from None
+    except (OSError, ValueError):
+        return None
+
+
 def read_skins(path) -> dict:
     """``{geometry id or name: {"corners": (c,) int, "joints": [node names or ids, one per skin
     joint, as candidates], "vertex": (e,), "joint": (e,), "weight": (e,)}}`` for every skin
-    controller of the file.  Never raises: ``{}`` when the file cannot be parsed."""
-    try:
-        root = ET.parse(path).getroot()
-    except (ET.ParseError, OSError, ValueError):
+    controller of the file (``{}`` when it cannot be opened).  Raises :class:`InputError` for
+    XML it cannot parse (:func:`_parse`)."""
+    root = _parse(path)
+    if root is None:
         return {}
     try:
         return _skins(root)
@@ -47,10 +71,10 @@ def read_skins(path) -> dict:
 
 def read_clips(path) -> list:
     """``[(name, start, end)]`` seconds, of the file's ``<animation_clip>`` elements in document
-    order (``[]`` when there are none or the file cannot be parsed)."""
-    try:
-        root = ET.parse(path).getroot()
-    except (ET.ParseError, OSError, ValueError):
+    order (``[]`` when there are none or the file cannot be opened; :class:`InputError` for XML
+    it cannot parse, :func:`_parse`)."""
+    root = _parse(path)
+    if root is None:
         return []
     out = []
     for el in root.iter():

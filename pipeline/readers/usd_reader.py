@@ -86,6 +86,10 @@ def _open(path):
         raise InputError(path, f"not a readable USD file: {one_line(exc, 200)}") from None
     if stage is None:
         raise InputError(path, "not a readable USD file")
+    errors = stage.GetCompositionErrors()
+    if errors:  # what validate reports as COL101 is a refusal here, never a silent partial stage
+        more = f" (+{len(errors) - 1} more)" if len(errors) > 1 else ""
+        raise InputError(path, f"its composition fails: {one_line(str(errors[0]), 200)}{more}")
     return stage
 
 

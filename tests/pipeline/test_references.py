@@ -126,7 +126,7 @@ def test_usd_source_sublayer_is_checked_before_composing(tmp_path, outside, case
     out = tmp_path / "o.usda"
     p = run("import", src, "-o", out)
     needle = {"etc-passwd": "an absolute path", "dev-zero": "an absolute path", "fifo": "is a FIFO",
-              "outside": "leaves the file's folder", "self": "src.usda"}[case]
+              "outside": "leaves the file's folder", "self": "its composition fails: Sublayer hierarchy"}[case]
     assert_refused(p, out, needle)
 
 
@@ -160,3 +160,25 @@ def test_validate_judges_the_asset_as_written(imported, tmp_path, outside, case)
     from colossus.runtime import ColliderError, load_collider
     with pytest.raises(ColliderError, match="names other files"):
         load_collider(asset)
+
+
+def test_collada_with_dtd_entities_is_refused_not_left_to_assimp(tmp_path):
+    """A DOCTYPE with entities (billion laughs here; external ones alike) made the Collada XML
+    reader give up without a word and the import exit 0 with assimp's uncorrected reading; now
+    it is one line, exit 1 (issue 27 item 3)."""
+    src_text = (SAMPLES.parent.parent / "shared" / "corpus" / "realworld" / "threejs_r121_stormtrooper.dae")
+    if not src_text.exists():
+        pytest.skip("../shared/corpus not here")
+    s = src_text.read_text()
+    i = s.index("?>") + 2
+    src = tmp_path / "st.dae"
+    src.write_text(s[:i] + '\n<!DOCTYPE COLLADA [ <!ENTITY a "x"> <!ENTITY b "&a;&a;&a;&a;"> ]>' + s[i:])
+    out = tmp_path / "o.usda"
+    assert_refused(run("import", src, "-o", out), out, "declares DTD entities")
+
+
+def test_usd_source_with_a_missing_sublayer_is_refused(tmp_path):
+    """A composition error (here a missing sublayer) is a refusal, as validate's COL101 is."""
+    src = _usd_with(tmp_path / "src.usda", ["missing.usda"])
+    out = tmp_path / "o.usda"
+    assert_refused(run("import", src, "-o", out), out, "'missing.usda': No such file")
