@@ -90,6 +90,9 @@ def main():
     if threading.current_thread() is threading.main_thread():
         # SIGTERM (a CI job's timeout) is handled like Ctrl-C: what finished is reported, exit 143
         signal.signal(signal.SIGTERM, on_sigterm)
+    from colossus.runtime import usdlog
+
+    usdlog.silence()  # usd-core's own warnings never reach the terminal: one line per problem, ours
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -58,8 +58,12 @@ def output_names(sources, ext: str = ".usda") -> list:
 
 def _import_unit(src, out, settings):
     """Worker side of one batch import: never raises for a bad input."""
+    from colossus.runtime import usdlog
+
     from .errors import ColossusError
     from .run import import_asset
+    usdlog.silence()
+    usdlog.take()
     try:
         res = import_asset(src, out, settings)
     except ColossusError as e:

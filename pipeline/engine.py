@@ -187,6 +187,9 @@ def _worker_init(numba_threads, parent=0):
         die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.environ.setdefault("NUMBA_NUM_THREADS", str(numba_threads))
+    from colossus.runtime import usdlog
+
+    usdlog.silence()
 
 
 def _share(workers: int) -> int:

@@ -42,8 +42,20 @@ PROOF_RULES = ("COL403", "COL404", "COL407")
 
 
 # ------------------------------------------------------------------------------ work units
+def _quiet():
+    """A unit's context, in whatever process runs it (the command's, a pool or Dask worker):
+    usd-core's warnings collected, not printed, the last unit's dropped, and what usd-core and
+    boost.python write to file descriptor 2 kept off the terminal (:mod:`runtime.usdlog`): what
+    usd-core has to say about an asset becomes a finding, never extra lines."""
+    from colossus.runtime import usdlog
+    usdlog.silence()
+    usdlog.take()
+    return usdlog.quiet_stderr()
+
+
 def unit_check(path, kw):
-    return check_asset(path, **kw)
+    with _quiet():
+        return check_asset(path, **kw)
 
 
 #: Seconds the contained read of one crate asset may take (``--jobs 1``; see :func:`unit_check_contained`).
@@ -116,6 +128,11 @@ def unit_check_contained(path, kw):
 
 
 def unit_plan(path, kw):
+    with _quiet():
+        return _plan(path, kw)
+
+
+def _plan(path, kw):
     from .asset import LoadedAsset, open_stage
     try:
         asset = LoadedAsset(open_stage(path), path)
@@ -132,13 +149,15 @@ def unit_plan(path, kw):
 def unit_clip(path, clip, kw):
     from .asset import LoadedAsset, open_stage
     from .frameproof import prove
-    asset = LoadedAsset(open_stage(path), path)
-    return prove(asset, subframes=kw.get("subframes", 0), chunk_frames=kw.get("chunk_frames"), clips=[clip],
-                 continuous=kw.get("continuous", True))
+    with _quiet():
+        asset = LoadedAsset(open_stage(path), path)
+        return prove(asset, subframes=kw.get("subframes", 0), chunk_frames=kw.get("chunk_frames"), clips=[clip],
+                     continuous=kw.get("continuous", True))
 
 
 def unit_finish(path, kw, proofs):
-    return check_asset(path, clip_proofs=proofs, **kw)
+    with _quiet():
+        return check_asset(path, clip_proofs=proofs, **kw)
 
 
 # ------------------------------------------------------------------------------ driver

@@ -1,8 +1,9 @@
 """Every process a command starts dies with it, and SIGTERM is handled like Ctrl-C (exit 143).
 
-A reader blocked on a FIFO (a glTF buffer with no writer) keeps the contained reader child alive
-for as long as the command waits; a ``validate --jobs 2`` has a pool of worker processes.  Killing
-the command (SIGKILL, SIGTERM) must leave none of them running 5 s later."""
+A reader that hangs (before the references check, a glTF buffer that was a FIFO did; here the
+reader child is patched to hang, ``tests/faults.py``) keeps the contained reader child alive for as
+long as the command waits; a ``validate --jobs 2`` has a pool of worker processes.  Killing the
+command (SIGKILL, SIGTERM) must leave none of them running 5 s later."""
 
 from __future__ import annotations
 
@@ -10,7 +11,6 @@ import json
 import os
 import shutil
 import signal
-import struct
 import subprocess
 import sys
 import time
@@ -19,7 +19,16 @@ import pytest
 
 from paths import SAMPLES
 
+from paths import ROOT
+
 COLOSSUS = [sys.executable, "-m", "colossus"]
+#: ``colossus`` with the contained reader patched to hang (a fork inherits the patch)
+HANGING_READER = [sys.executable, "-c",
+                  "import sys, faults\n"
+                  "from colossus.pipeline import isolation\n"
+                  "isolation._read_in_child = faults.dying(isolation._read_in_child, 'hang')\n"
+                  "from colossus.cli import main\n"
+                  "main(sys.argv[1:], prog_name='colossus')\n"]
 
 
 def _children(pid: int) -> set:
@@ -63,24 +72,12 @@ def _wait_for(cond, seconds=60.0):
     return None
 
 
-@pytest.fixture()
-def fifo_gltf(tmp_path):
-    """The limb sample as .gltf + .bin, the .bin a FIFO nobody writes to."""
-    data = (SAMPLES / "limb.glb").read_bytes()
-    n = struct.unpack_from("<I", data, 12)[0]
-    doc = json.loads(data[20:20 + n])
-    doc["buffers"][0]["uri"] = "limb.bin"
-    src = tmp_path / "limb.gltf"
-    src.write_text(json.dumps(doc))
-    os.mkfifo(tmp_path / "limb.bin")
-    return src
-
-
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
-def test_killed_import_leaves_no_reader(fifo_gltf, tmp_path, sig):
+def test_killed_import_leaves_no_reader(tmp_path, sig):
     out = tmp_path / "o.usda"
-    proc = subprocess.Popen(COLOSSUS + ["import", str(fifo_gltf), "-o", str(out)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(HANGING_READER + ["import", str(SAMPLES / "limb.glb"), "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONPATH": str(ROOT / "tests")})
     try:
         kids = _wait_for(lambda: _children(proc.pid))
         assert kids, "the contained reader never started"

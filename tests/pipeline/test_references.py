@@ -182,3 +182,15 @@ def test_usd_source_with_a_missing_sublayer_is_refused(tmp_path):
     src = _usd_with(tmp_path / "src.usda", ["missing.usda"])
     out = tmp_path / "o.usda"
     assert_refused(run("import", src, "-o", out), out, "'missing.usda': No such file")
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_nothing_of_usd_cores_reaches_stderr(jobs):
+    """A crate asset with a value usd-core cannot unpack: usd-core and boost.python used to print
+    "TypeError: No to_python converter ..." once per failed read (12 lines); now the asset's
+    COL001 is the whole story, and stderr stays empty (issue 26 item 4)."""
+    case = SAMPLES.parent / "tests" / "fuzz" / "cases" / "asset_undecodable_value.usdc"
+    p = run("validate", case, "--jobs", jobs, "--format", "json")
+    assert p.returncode == 1 and p.stderr == "", p.stderr
+    (rep,) = json.loads(p.stdout)["assets"]
+    assert "COL001" in [f["code"] for f in rep["findings"]]
