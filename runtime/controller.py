@@ -106,7 +106,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .collider import Collider, Pose, SurfacePoints
+from .collider import Collider, Pose
+from .results import SurfacePoints
 
 STANDING, SLIDING, HOLDING, HANGING, FALLING = "standing", "sliding", "holding", "hanging", "falling"
 #: Every state, in a fixed order (their index is the state's code in arrays).

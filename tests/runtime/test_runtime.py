@@ -9,7 +9,7 @@ from pxr import Usd, Vt
 
 from colossus.runtime import ColliderError, SphereContacts, SurfacePoints, load_collider
 from colossus.runtime import kernels as K
-from colossus.runtime.collider import PARALLEL_RAYS
+from colossus.runtime.backends import PARALLEL_RAYS
 from references.naive_queries import (closest_point_on_triangles, naive_raycast, naive_skin,
                                 naive_sphere_contacts, ray_triangles)
 from references.usd_reference import UsdSkelReference, read_parts
