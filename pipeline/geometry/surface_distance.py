@@ -40,7 +40,8 @@ Kernels (private, ``_``-prefixed; readable references in ``tests/references/naiv
 ``_piece_bounds``: for (pose, piece) pairs, the smaller of the two bounds above;
 ``_all_triangle_bounds``: the same for every source triangle on every pose of a chunk (each
 vertex's distance to its home triangle computed once per pose).  Ericson's
-closest point on a triangle is the runtime's (:mod:`runtime.kernels.query`), the one copy of it.
+closest point on a triangle is the runtime's (:func:`runtime.kernels.triangle.closest_on_triangle`),
+the one copy of it.
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ import numpy as np
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
-from colossus.runtime.kernels.query import _closest_on_triangle
+from colossus.runtime.kernels.triangle import closest_on_triangle
 
 #: Pairs per task of the parallel kernels (the scratch buffer is allocated once per task).
 BLOCK = 512
@@ -113,7 +114,7 @@ def _dist2(px, py, pz, tv, tri, j, tmp):
     """Squared distance from p to target triangle ``j`` of the pose ``tv`` (n, 3).  Not inlined:
     the runtime's closest-point routine is inlined once here, not at every call site (compile
     time)."""
-    _closest_on_triangle(px, py, pz, tv, tri[j, 0], tri[j, 1], tri[j, 2], tmp)
+    closest_on_triangle(px, py, pz, tv, tri[j, 0], tri[j, 1], tri[j, 2], tmp)
     return (tmp[0] - px) ** 2 + (tmp[1] - py) ** 2 + (tmp[2] - pz) ** 2
 
 
