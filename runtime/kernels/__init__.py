@@ -12,6 +12,8 @@ or ``tests/references/naive_queries.py``):
 * :mod:`~runtime.kernels.query`: rays, sphere contacts, surface points;
 * :mod:`~runtime.kernels.triangle`: the ray-triangle and closest-point-on-triangle primitives
   (public: the query kernels and the import's surface distance share them);
+* :mod:`~runtime.kernels.contact`: the character controller's (contact summary, carrying a point
+  with a moving surface);
 * :mod:`~runtime.kernels.config`: the fast-math policies.
 
 This package's face is the modules' public functions (below); the private kernels are reached
