@@ -220,3 +220,35 @@ def test_no_test_module_imports_another():
             bad += [f"{f.relative_to(ROOT)}:{node.lineno} imports {n}" for n in names
                     if n.split(".")[-1].startswith("test_") or n.split(".")[-1] == "conftest"]
     assert not bad, "\n".join(bad)
+
+
+def test_no_private_name_crosses_a_floor():
+    """A ``_name`` is its floor's own: no module imports one from another floor, or reads one off a
+    module of another floor (``from colossus.runtime.kernels import query as Q; Q._raycast``); and a
+    package's face (``__init__``) re-exports no private name."""
+    mods = _modules()
+    bad = []
+    for name, path in mods.items():
+        tree = ast.parse(path.read_text(), filename=str(path))
+        is_pkg = path.name == "__init__.py"
+        pkg = name.split(".") if is_pkg else name.split(".")[:-1]
+        foreign = {}  # local name -> the other floor's module or name it is bound to
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                mod = ".".join(pkg[: len(pkg) - (node.level - 1)] + ([node.module] if node.module else [])) \
+                    if node.level else node.module
+                for a in node.names:
+                    private = a.name.startswith("_") and not a.name.startswith("__")
+                    if private and (is_pkg or floor(mod or "") != floor(name)):
+                        bad.append(f"{path.relative_to(ROOT)}:{node.lineno} imports {mod}.{a.name}")
+                    if floor(mod or "") is not None and floor(mod) != floor(name):
+                        foreign[a.asname or a.name] = f"{mod}.{a.name}"
+            elif isinstance(node, ast.Import):
+                for a in node.names:
+                    if floor(a.name) is not None and floor(a.name) != floor(name):
+                        foreign[a.asname or a.name.split(".")[0]] = a.name
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in foreign
+                    and node.attr.startswith("_") and not node.attr.startswith("__")):
+                bad.append(f"{path.relative_to(ROOT)}:{node.lineno} reads {foreign[node.value.id]}.{node.attr}")
+    assert not bad, "private names across floors:\n" + "\n".join(bad)
