@@ -9,15 +9,17 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from colossus.runtime.kernels.config import FASTMATH_OFF
 
-@njit(cache=True, inline="always")
+
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _corner(P, v, a, b, px, py, pz, moved):
     if moved and (v == a or v == b):
         return px, py, pz
     return P[v, 0], P[v, 1], P[v, 2]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _normal(P, T, f, a, b, px, py, pz, moved):
     """Normal (not normalised) of face ``f`` with vertices ``a``/``b`` put at ``p`` when ``moved``."""
     x0, y0, z0 = _corner(P, T[f, 0], a, b, px, py, pz, moved)
@@ -28,7 +30,7 @@ def _normal(P, T, f, a, b, px, py, pz, moved):
     return uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _apply(pos, tris, col, locked, vshell, shell_verts, qa, qb, qw, stop_faces, limit, min_cos, reg,
            out_pos, out_tris, alive, reason, root):
     """Replay ``col[:limit]`` on ``pos``/``tris`` (see :mod:`pipeline.geometry.collapse`).  Writes

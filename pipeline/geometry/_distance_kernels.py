@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from colossus.runtime.kernels.config import FASTMATH_OFF
 from colossus.runtime.kernels.triangle import closest_on_triangle
 
 #: Pairs per task of the parallel kernels (the scratch buffer is allocated once per task).
@@ -26,7 +27,7 @@ BLOCK = 512
 
 
 # ------------------------------------------------------------------------------ kernels
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _cover(ax, ay, az, bx, by, bz, cx, cy, cz):
     """Covering radius of triangle abc by its corners (see :func:`cover_radius`)."""
     la = (bx - cx) ** 2 + (by - cy) ** 2 + (bz - cz) ** 2  # squared side opposite a
@@ -54,7 +55,7 @@ def _cover(ax, ay, az, bx, by, bz, cx, cy, cz):
 
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _sample_xyz(v, f, s_idx, s_bary, s):
     """Sample ``s`` (a barycentric combination of three source vertices) at pose ``f``."""
     i0, i1, i2 = s_idx[s, 0], s_idx[s, 1], s_idx[s, 2]
@@ -65,7 +66,7 @@ def _sample_xyz(v, f, s_idx, s_bary, s):
     return x, y, z
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _dist2(px, py, pz, tv, tri, j, tmp):
     """Squared distance from p to target triangle ``j`` of the pose ``tv`` (n, 3).  Not inlined:
     the runtime's closest-point routine is inlined once here, not at every call site (compile
@@ -74,7 +75,7 @@ def _dist2(px, py, pz, tv, tri, j, tmp):
     return (tmp[0] - px) ** 2 + (tmp[1] - py) ** 2 + (tmp[2] - pz) ** 2
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FASTMATH_OFF)
 def _sample_distances(sv, tv, pf, ps, s_idx, s_bary, tri, cand, crow, vt_off, vt_tri, walk, out_d, out_t, out_b):
     """For each pair ``p``: the distance from sample ``ps[p]`` at pose ``pf[p]`` of ``sv``
     (F, n, 3) to the nearest target triangle of ``cand[crow[p]]`` (-1 ends a row) at the same
@@ -125,7 +126,7 @@ def _sample_distances(sv, tv, pf, ps, s_idx, s_bary, tri, cand, crow, vt_off, vt
             out_b[p, 0], out_b[p, 1], out_b[p, 2] = bu, bv, bw
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FASTMATH_OFF)
 def _piece_bounds(sv, tv, pf, pt, ub, given, corners, s_idx, s_bary, near, home, tri, thr, out, out_cover):
     """For each pair ``p`` (pose ``pf[p]``, piece ``pt[p]`` with sample corners
     ``corners[pt[p]]``): ``min(max(u) + cover, max over corners of d(corner, home))`` where the
@@ -159,7 +160,7 @@ def _piece_bounds(sv, tv, pf, pt, ub, given, corners, s_idx, s_bary, near, home,
             out[p] = b
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FASTMATH_OFF)
 def _all_triangle_bounds(sv, tv, stri, near, home, ttri, thr, ub, out, out_cover):
     """Every source triangle ``stri`` on every pose of ``sv`` (F, n, 3): first ``ub`` (F, n), each
     vertex's distance to its ``near`` target triangle, then ``out`` (F, m), the smaller of the
@@ -202,7 +203,7 @@ def _all_triangle_bounds(sv, tv, stri, near, home, ttri, thr, ub, out, out_cover
             out_cover[f, q] = r
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _cover_many(v_all, tri, out):
     m = tri.shape[0]
     for ft in range(v_all.shape[0] * m):

@@ -51,14 +51,14 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .config import FASTMATH_PROOF as _FM
+from .config import FASTMATH_PROOF
 from .skin import PARALLEL_WORK
 
 #: Relative padding of every bound (float64 rounding of the few dozen operations behind it).
 ROUND = 1e-12
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=FASTMATH_PROOF)
 def _norm2(m):
     """Upper bound of the spectral norm of the 3x3 linear part of a 4x4 ``m`` (see the module
     docstring), padded by :data:`ROUND`."""
@@ -73,7 +73,7 @@ def _norm2(m):
     return math.sqrt(best) * (1.0 + ROUND)
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=FASTMATH_PROOF)
 def _colmax(m):
     """Largest column norm of the 3x3 part of ``m`` (the contract's radius scale)."""
     s = 0.0
@@ -84,14 +84,14 @@ def _colmax(m):
     return s
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=FASTMATH_PROOF)
 def _xf(m, x, y, z):
     """``m @ (x, y, z, 1)`` for a 4x4 (or 3x4) column-vector ``m``: three float64."""
     return (m[0, 0] * x + m[0, 1] * y + m[0, 2] * z + m[0, 3], m[1, 0] * x + m[1, 1] * y + m[1, 2] * z + m[1, 3],
             m[2, 0] * x + m[2, 1] * y + m[2, 2] * z + m[2, 3])
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=FASTMATH_PROOF)
 def _pose_bound(f, p, world, part_joint, part_centers, part_radii, pj_offsets, pj_joint, pj_center,
                 pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db, e, E):
     """Part ``p`` at pose ``f``: sphere ``sph[f, p]`` (centre, radius), bounds ``kb[f, p]`` (test
@@ -145,7 +145,7 @@ def _pose_bound(f, p, world, part_joint, part_centers, part_radii, pj_offsets, p
     db[f, p] = (best + part_wdev[p] * (sJ * dmax + cnorm)) * pad
 
 
-@njit(cache=True, parallel=True, fastmath=_FM)
+@njit(cache=True, parallel=True, fastmath=FASTMATH_PROOF)
 def _pose_bounds(world, part_joint, part_centers, part_radii, pj_offsets, pj_joint, pj_center, pj_radius,
                  pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db):
     """:func:`_pose_bound` for every (pose, part): world (F, J, 4, 4) joint -> stage; sph
@@ -158,7 +158,7 @@ def _pose_bounds(world, part_joint, part_centers, part_radii, pj_offsets, pj_joi
                     np.empty(h_w.shape[1]), np.empty((4, 4)))
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=FASTMATH_PROOF)
 def _pose_bounds_serial(world, part_joint, part_centers, part_radii, pj_offsets, pj_joint, pj_center,
                         pj_radius, pj_rel, part_wabs, part_wdev, h_offsets, h_dist, h_w, sph, kb, db):
     """:func:`_pose_bounds` on one thread (the runtime's per-frame call, and small proofs)."""
@@ -333,7 +333,7 @@ def pose_bounds(world, bd: BoundData, parallel=None):
     return sph, kb, db
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=FASTMATH_PROOF)
 def _cull_spheres(sph, kb, db, spheres, cull):
     """spheres (P, 4) = sph[0]; cull (P, 4): same centres, radius = the better of tests K and D,
     padded for the float32 rounding of the posed points the queries read (relative 1e-5 of the

@@ -12,11 +12,13 @@ import math
 import numpy as np
 from numba import njit
 
+from .config import FASTMATH_OFF
+
 #: A contact counts towards a push only when its normal is within ~78 degrees of the push.
 _MIN_COS = 0.2
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _summarize(normal, depth, skin, tol, up, cos_slope, cap, ground, out):
     """Summarise the contacts of a sphere queried with radius ``r + skin``.
 
@@ -81,7 +83,7 @@ def _summarize(normal, depth, skin, tol, up, cos_slope, cap, ground, out):
     out[11] = ng
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _carry(pos, f0, f1, dt, out, vel):
     """Carry ``pos`` (3,) with a surface frame: f0, f1 (6,) are the frames (centroid, unit mean
     normal) before and after.  out (3,) = c1 + R (pos - c0), R the least rotation taking n0 to
@@ -109,7 +111,7 @@ def _carry(pos, f0, f1, dt, out, vel):
     return math.sqrt(s2)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _tangential(a, b, c, normal):
     """Length of the part of ``a - b - c`` (3,) across unit ``normal``: the slip."""
     x, y, z = a[0] - b[0] - c[0], a[1] - b[1] - c[1], a[2] - b[2] - c[2]
@@ -118,12 +120,12 @@ def _tangential(a, b, c, normal):
     return math.sqrt(x * x + y * y + z * z)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _length(v):
     return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _along(move, normal, speed, out):
     """out (3,): ``move`` projected onto the plane of unit ``normal``, rescaled to keep its
     length, times ``speed`` (zeros when move is along the normal or zero)."""

@@ -26,9 +26,9 @@ The chain recursion and the factor terms each have a compiled kernel and a numpy
 inputs (:func:`_chain_bounds_numpy`, :func:`_factor_terms_numpy` with :func:`_inv_affine_numpy`:
 the same operations; both paths are tested equal), so a demo-sized clip compiles neither.
 Fast math: the chain recursion runs under :data:`~runtime.kernels.config.FASTMATH_PROOF` (it
-decides a proof); the factor terms under none (infinities are meaningful there).  The bounds are
-padded for float64 rounding (``delta`` and ``pert`` by ``1 + 1e-9``, the per-vertex chord bound
-by :data:`~runtime.kernels.bounds.ROUND`).
+decides a proof); the factor terms under :data:`~runtime.kernels.config.FASTMATH_OFF`
+(infinities are meaningful there).  The bounds are padded for float64 rounding (``delta`` and
+``pert`` by ``1 + 1e-9``, the per-vertex chord bound by :data:`~runtime.kernels.bounds.ROUND`).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ import numpy as np
 from numba import njit, prange
 
 from .bounds import ROUND, _xf
-from .config import FASTMATH_PROOF as _FM
+from .config import FASTMATH_OFF, FASTMATH_PROOF
 from .skin import PARALLEL_WORK, skin_frames
 
 # ------------------------------------------------------------------ continuous time (chords)
@@ -50,7 +50,7 @@ from .skin import PARALLEL_WORK, skin_frames
 CHORD_BLOCK = 1 << 14
 
 
-@njit(cache=True, inline="always", fastmath=_FM)
+@njit(cache=True, inline="always", fastmath=FASTMATH_PROOF)
 def _chain_task(i, k, L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert):
     """Pair ``k`` over interval ``i`` of :func:`_chain_bounds_serial`: writes ``e0[i, k]``,
     ``e1[i, k]``, ``delta[i, k]``, ``lam[i, k]`` and ``pert[i, k]``.
@@ -104,7 +104,7 @@ def _chain_task(i, k, L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_
     pert[i, k] = pe * (1.0 + 1e-9)
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=FASTMATH_PROOF)
 def _chain_bounds_serial(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert):
     """Deviation-from-chord bounds of every (part, joint) ball over every interval.
 
@@ -142,7 +142,7 @@ def _chain_bounds_serial(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, pa
         _chain_task(task // M, task % M, L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert)
 
 
-@njit(cache=True, parallel=True, fastmath=_FM)
+@njit(cache=True, parallel=True, fastmath=FASTMATH_PROOF)
 def _chain_bounds_parallel(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert):
     """:func:`_chain_bounds_serial` over threads (large inputs; see :func:`chain_bounds`)."""
     M = pj_center.shape[0]
@@ -326,7 +326,7 @@ def _chord_block(t, p, vs, points, ji, jw, mats, centers, task_a, task_b, task_d
 
 
 # -------------------------------------------------------------------- continuous-time factors
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _inv_affine_into(m, out):
     """``out`` = inverse of the affine 4x4 ``m`` (last row 0 0 0 1), by the 3x3 adjugate."""
     a00, a01, a02 = m[0, 0], m[0, 1], m[0, 2]
@@ -352,7 +352,7 @@ def _inv_affine_into(m, out):
     out[3, 3] = 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _factor_terms(L, t, q, s, anim, omega_margin, alpha_margin, half_rel, Li, fw, iv, dt, eps, iso):
     """The kernel of :func:`factor_terms` (no fastmath: infinities are meaningful here)."""
     T, J = L.shape[0], L.shape[1]

@@ -14,11 +14,12 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .config import FASTMATH_OFF
 from .skin import _skin_subset
 from .triangle import closest_on_triangle, ray_triangle
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _prepare_part(p, version, lz, points, part_chunks, chunk_sph):
     """Make part ``p`` queryable at pose ``version``: skin its vertices (unless the whole skin
     is at this version), then compute its chunk spheres.  ``lz`` is what that needs (built by
@@ -33,7 +34,7 @@ def _prepare_part(p, version, lz, points, part_chunks, chunk_sph):
 # -- ray casting -------------------------------------------------------------------------------
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _mt_face(ox, oy, oz, dx, dy, dz, points, triangles, f):
     """:func:`~runtime.kernels.triangle.ray_triangle` on triangle ``f`` of the posed ``points``
     (its corners read as float64)."""
@@ -44,7 +45,7 @@ def _mt_face(ox, oy, oz, dx, dy, dz, points, triangles, f):
                np.float64(points[c, 0]), np.float64(points[c, 1]), np.float64(points[c, 2]))
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _chunk_spheres(p, points, chunk_vert_offsets, chunk_verts, part_chunks, chunk_sph):
     """Bounding spheres of part ``p``'s chunks (a few faces each) on the posed points:
     centre = box centre of the chunk's vertices, radius = half the box diagonal (padded).
@@ -79,7 +80,7 @@ def _chunk_spheres(p, points, chunk_vert_offsets, chunk_verts, part_chunks, chun
         chunk_sph[c, 3] = math.sqrt(r2) * (1.0 + 1e-6) + 1e-9
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FASTMATH_OFF)
 def _all_chunk_spheres(points, chunk_vert_offsets, chunk_verts, part_chunks, chunk_sph, ready, version):
     """Chunk spheres of every part not yet ``ready`` at this pose ``version``."""
     for p in prange(part_chunks.shape[0] - 1):
@@ -88,7 +89,7 @@ def _all_chunk_spheres(points, chunk_vert_offsets, chunk_verts, part_chunks, chu
             ready[p] = version
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _ray_enters(ox, oy, oz, dx, dy, dz, cx, cy, cz, rad, best):
     """Does the segment ``o + t d``, ``0 <= t <= best`` (unit d) meet the sphere?"""
     lx = cx - ox
@@ -102,7 +103,7 @@ def _ray_enters(ox, oy, oz, dx, dy, dz, cx, cy, cz, rad, best):
     return not (tca + thc < 0.0 or tca - thc > best)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _ray_one(r, origins, directions, max_distance, points, triangles, cull, faces, chunk_offsets,
              part_chunks, chunk_sph, ready, version, lz, distance, triangle, part, bary):
     ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
@@ -130,7 +131,7 @@ def _ray_one(r, origins, directions, max_distance, points, triangles, cull, face
     _ray_store(r, best, bf, bp, bu, bv, distance, triangle, part, bary)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _ray_store(r, best, bf, bp, bu, bv, distance, triangle, part, bary):
     """Write ray ``r``'s nearest hit (triangle ``bf`` < 0: a miss)."""
     if bf < 0:
@@ -149,7 +150,7 @@ def _ray_store(r, best, bf, bp, bu, bv, distance, triangle, part, bary):
         bary[r, 2] = bv
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _raycast(origins, directions, max_distance, points, triangles, cull, faces, chunk_offsets,
              part_chunks, chunk_sph, ready, version, lz, distance, triangle, part, bary):
     """Nearest hit per ray (serial; the wrapper picks this for few rays). Part spheres, then
@@ -160,7 +161,7 @@ def _raycast(origins, directions, max_distance, points, triangles, cull, faces, 
                  triangle, part, bary)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FASTMATH_OFF)
 def _raycast_parallel(origins, directions, max_distance, points, triangles, cull, faces,
                       chunk_offsets, part_chunks, chunk_sph, ready, version, lz, distance,
                       triangle, part, bary):
@@ -171,7 +172,7 @@ def _raycast_parallel(origins, directions, max_distance, points, triangles, cull
                  triangle, part, bary)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _raycast_all(origins, directions, max_distance, points, triangles, distance, triangle, part, bary):
     """Nearest hit per ray over every triangle, no culling: the brute-force backend (the
     reference the culled kernels are tested against).  A kernel of its own, so game code, which
@@ -194,7 +195,7 @@ def _raycast_all(origins, directions, max_distance, points, triangles, distance,
 # -- sphere contacts ---------------------------------------------------------------------------
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _apart(spheres, k, px, py, pz, radius):
     """Is sphere ``k`` of ``spheres`` (n, 4) beyond ``radius`` of ``(px, py, pz)``?"""
     dx = spheres[k, 0] - px
@@ -204,7 +205,7 @@ def _apart(spheres, k, px, py, pz, radius):
     return dx * dx + dy * dy + dz * dz > rr * rr
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _box_gap2(px, py, pz, points, ia, ib, ic):
     """Squared distance from ``(px, py, pz)`` to the bounding box of triangle (ia, ib, ic): a
     lower bound of the squared distance to the triangle, so a face whose box is beyond the
@@ -222,7 +223,7 @@ def _box_gap2(px, py, pz, points, ia, ib, ic):
     return g
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n, tri_out, point_out,
                    normal_out, depth_out, bary_out):
     """Record triangle ``f`` (closest point and barycentric in ``tmp``) as contact ``n``.
@@ -259,7 +260,7 @@ def _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n, tri_out
     return n + 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _face_contact(f, ia, ib, ic, px, py, pz, radius, r2, points, triangles, tmp, n, tri_out, point_out,
                   normal_out, depth_out, bary_out):
     """Test triangle ``f`` (corners ia, ib, ic) against the sphere: record it as contact ``n``
@@ -273,7 +274,7 @@ def _face_contact(f, ia, ib, ic, px, py, pz, radius, r2, points, triangles, tmp,
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offsets, part_chunks,
                      chunk_sph, ready, version, lz, dedup, mark, stamp, tri_out, point_out,
                      normal_out, depth_out, bary_out):
@@ -310,7 +311,7 @@ def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offse
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _sphere_contacts_all(center, radius, points, triangles, tri_out, point_out, normal_out, depth_out,
                          bary_out):
     """:func:`_sphere_contacts` over every triangle, no culling: the brute-force backend (the
@@ -329,7 +330,7 @@ def _sphere_contacts_all(center, radius, points, triangles, tri_out, point_out, 
 # -- surface points ----------------------------------------------------------------------------
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _ready_faces(tri, face_part, ready, version, lz, points, part_chunks, chunk_sph):
     """Make the corners of triangles ``tri`` valid at pose ``version`` without skinning the
     rest: prepare (:func:`_prepare_part`) each holding part not yet ``ready``.  Returns False,
@@ -348,7 +349,7 @@ def _ready_faces(tri, face_part, ready, version, lz, points, part_chunks, chunk_
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _surface_frame(points, triangles, tri, bary, out):
     """The frame of surface points (tri (C,), barycentric bary (C, 3)) on the posed ``points``
     (V, 3) float32: out (6,) = [centroid of the points, unit mean of their triangles' unit
@@ -392,7 +393,7 @@ def _surface_frame(points, triangles, tri, bary, out):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _surface_points(points, triangles, tri, bary, out):
     """World positions of barycentric points on triangles: out[i] = sum_k bary[i,k] * p[tri[i],k]."""
     for i in range(tri.shape[0]):
@@ -403,7 +404,7 @@ def _surface_points(points, triangles, tri, bary, out):
                          + bary[i, 2] * points[c3, c])
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _face_normals(points, triangles, tri, out):
     """Unit geometric normals (e1 x e2, counter-clockwise = outward) of triangles ``tri``;
     zero for a degenerate triangle."""
@@ -430,7 +431,7 @@ def _face_normals(points, triangles, tri, out):
             out[i, 2] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _hit_fill(origins, directions, distance, triangle, points, triangles, point, normal):
     """Hit points and normals of the rays that hit (NaN for misses)."""
     for r in range(origins.shape[0]):

@@ -1,6 +1,6 @@
 """The two triangle primitives of the project's queries, shared by the runtime's query kernels
 (:mod:`runtime.kernels.query`) and the import's surface distance
-(:mod:`pipeline.geometry.surface_distance`): one copy of each.
+(:mod:`pipeline.geometry._distance_kernels`): one copy of each.
 
 * :func:`ray_triangle`: Möller-Trumbore (1997) on scalars, both sides;
 * :func:`closest_on_triangle`: Ericson's ClosestPtPointTriangle (Real-Time Collision Detection
@@ -19,8 +19,10 @@ import math
 import numpy as np
 from numba import njit
 
+from .config import FASTMATH_OFF
 
-@njit(cache=True, inline="always")
+
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def ray_triangle(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, cx, cy, cz):
     """Möller-Trumbore on scalars, both sides: (t, u, v) or t = inf on a miss (u, v weights of
     the 2nd and 3rd corner). Scalars only: array arguments would cost refcounting per call."""
@@ -55,7 +57,7 @@ def ray_triangle(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, cx, cy, cz):
     return t, u, v
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def closest_on_triangle(px, py, pz, points, ia, ib, ic, out):
     """Ericson's ClosestPtPointTriangle (Real-Time Collision Detection 5.1.5), with barycentrics.
 
