@@ -1,6 +1,8 @@
 """Query kernels of the runtime: ray casts, sphere contacts, surface points (private,
-``_``-prefixed, behind the validating wrappers in :mod:`runtime.collider`).  Each has a slow
-readable numpy reference in ``tests/references/naive_queries.py``.
+``_``-prefixed, behind the validating wrappers in :mod:`runtime.collider` and the backends of
+:mod:`runtime.backends`).  Each has a slow readable numpy reference in
+``tests/references/naive_queries.py``; the triangle tests themselves (Möller-Trumbore, Ericson's
+closest point) are :mod:`runtime.kernels.triangle`'s.
 
 Queries read posed points ``(V, 3) float32`` in stage space and work in float64.  A part is made
 queryable lazily (:func:`_prepare_part`): its vertices are skinned by the one skinning kernel
