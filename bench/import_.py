@@ -30,7 +30,7 @@ def bench_import(triangles=200_000, bones=60, clips=2, frames=120, echo=print):
 
     from colossus.pipeline.isolation import read_isolated
     from colossus.pipeline.readers import read
-    from colossus.pipeline.readers.assimp_reader import _flags
+    from colossus.pipeline.readers.assimp_reader import assimp_flags
     from colossus.pipeline.run import import_asset
     from colossus.bench.synth import write_glb
 
@@ -41,7 +41,7 @@ def bench_import(triangles=200_000, bones=60, clips=2, frames=120, echo=print):
         import_asset(small, os.path.join(tmp, "warm.usda"))
         src = os.path.join(tmp, "bench.glb")
         nv, nf = write_glb(src, triangles, bones, clips, frames)
-        t_assimp, _ = _best(lambda: assimp_py.import_file(src, _flags()), 3)
+        t_assimp, _ = _best(lambda: assimp_py.import_file(src, assimp_flags()), 3)
         t_read, _ = _best(lambda: read(src), 3)
         t_contained, _ = _best(lambda: read_isolated(src), 3)
         t_import, res = _best(lambda: import_asset(src, os.path.join(tmp, "bench.usda")), 1)

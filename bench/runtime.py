@@ -292,7 +292,6 @@ def run_bench(path=None, repeat=50):
     base3 = _median_time(lambda: trimesh.proximity.closest_point(m, centers[next(it2) % 64][None]),
                          max(10, repeat // 2), warm=2)
     # -- 5: any pose (IK / ragdoll): pose_from_joints with random joint rotations up to 180 degrees
-    from colossus.runtime.kernels import bounds as B
     from colossus.runtime.kernels.pose import trs_matrices
 
     rest = d.rest_local
@@ -306,8 +305,7 @@ def run_bench(path=None, repeat=50):
     locals_ = [trs_matrices(rest[:, :3, 3], q, np.ones((len(q), 3))) for q in quats]
     fj = col.pose_from_joints(locals_[0])
     ours5 = _median_time(lambda: col.pose_from_joints(locals_[next(it5) % 64], out=fj), repeat)
-    cert5 = _median_time(lambda: (B._pose_bounds_serial(fj._world1, *d.bounds.args(), fj._sph, fj._kb, fj._db),
-                                  B._cull_spheres(fj._sph, fj._kb, fj._db, fj.spheres, fj.cull)), repeat * 4)
+    cert5 = _median_time(lambda: (fj.__setattr__("_bounded", -1), fj._bounds()), repeat * 4)
     skin5 = _median_time(lambda: (fj.__setattr__("_full", -1), fj._skin_all()), repeat)
     refit = np.mean([col.pose_from_joints(L).refit.mean() for L in locals_[:16]])
     ctrl_rows = bench_controller(col, steps=max(60, 5 * repeat))

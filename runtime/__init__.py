@@ -1,9 +1,10 @@
 """colossus runtime: pose a collider asset at any time and query it (rays, sphere contacts,
 surface points that move with the skin). See :func:`load_collider`."""
 
-from .collider import (BACKENDS, BruteForceBackend, Collider, PartsBackend, Pose, RayHits,
-                       SphereContacts, SurfacePoints, TrimeshBackend, load_collider)
+from .backends import BACKENDS, BruteForceBackend, PartsBackend, TrimeshBackend
+from .collider import Collider, Pose, load_collider
 from .errors import ColliderError
+from .results import RayHits, SphereContacts, SurfacePoints
 
 __all__ = ["load_collider", "ColliderError", "Collider", "Pose", "RayHits", "SphereContacts",
            "SurfacePoints", "PartsBackend", "BruteForceBackend", "TrimeshBackend", "BACKENDS"]

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .kernels import bounds as B
+from . import kernels as B  # the bounds: at a pose (kernels.bounds) and between samples (kernels.interval)
 from .kernels import pose as PK
 from .kernels import skin as SK
 from .schema import parents_first

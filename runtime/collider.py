@@ -12,24 +12,26 @@ Queries work in float64 on the float32 posed points.  Matrices are column-vector
 
 >>> pose = col.pose_from_joints(local)     # any pose: (J, 4, 4) joint-local, skeleton order
 >>> pose.refit                             # (P,) bool: spheres grown because the stored one did not hold
+
+The records the queries return are in :mod:`runtime.results`; the backends that answer them
+(parts, brute force, trimesh) in :mod:`runtime.backends`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
-from . import kernels as K
 from .asset import ClipData, ColliderData, read_collider
+from .backends import get_backend
 from .kernels import bounds as B
 from .kernels import pose as PK
+from .kernels import query as QK
 from .kernels import skin as SK
 from .errors import ColliderError
+from .results import RayHits, SphereContacts, SurfacePoints
 
-#: Above this many rays the parallel ray kernel is used.
-PARALLEL_RAYS = 256
 #: Above this many vertices a pose's full skin runs on every core.  With the per-vertex kernel
 #: inlined (runtime.kernels.skin._lbs) one skinning pass is memory-bound: on this project's 2
 #: cores the one-thread pass is the faster one from 20,000 vertices (0.12 vs 0.15 ms) to 200,000
@@ -40,233 +42,6 @@ PARALLEL_SKIN = 1_000_000
 #: radius when that is at most this many times the stored radius, else to the farthest skinned
 #: vertex of the part (exact, O(part vertices)).
 REFIT_FROM_BOUND = 1.25
-
-
-# -- results -----------------------------------------------------------------------------------
-
-
-@dataclass
-class RayHits:
-    """Nearest hit per ray. A miss has distance ``inf``, triangle and part ``-1``, point and
-    normal NaN, barycentric 0.
-
-    distance (R,) float64 (stage units along the normalised direction), point (R, 3),
-    normal (R, 3) unit geometric normal of the triangle (outward = counter-clockwise),
-    triangle (R,) int64, barycentric (R, 3) weights of the triangle's 3 vertices,
-    part (R,) int64 the first part (in part order) holding the triangle."""
-
-    distance: np.ndarray
-    point: np.ndarray
-    normal: np.ndarray
-    triangle: np.ndarray
-    barycentric: np.ndarray
-    part: np.ndarray
-
-    @property
-    def hit(self) -> np.ndarray:
-        """(R,) bool: which rays hit."""
-        return self.triangle >= 0
-
-    def __len__(self):
-        return len(self.distance)
-
-
-@dataclass
-class SphereContacts:
-    """Every triangle a sphere touches (closest point within the radius), each once, in the
-    order found (parts, then chunks; ``np.argsort(cs.triangle)`` to sort).
-
-    triangle (C,) int64, point (C, 3) closest point on the triangle, normal (C, 3) unit vector
-    from the point towards the sphere centre (the face normal if the centre is on the face),
-    depth (C,) radius - distance, barycentric (C, 3) of the point on its triangle."""
-
-    triangle: np.ndarray
-    point: np.ndarray
-    normal: np.ndarray
-    depth: np.ndarray
-    barycentric: np.ndarray
-
-    def __len__(self):
-        return len(self.triangle)
-
-    def anchors(self) -> "SurfacePoints":
-        """The contact points as surface points that move with the skin."""
-        return SurfacePoints(self.triangle, self.barycentric)
-
-    def resolve_vector(self) -> np.ndarray:
-        """(3,) the thesis' discrete resolution: the average of ``normal * depth`` over the
-        contacts (zeros when there are none)."""
-        if len(self) == 0:
-            return np.zeros(3)
-        return (self.normal * self.depth[:, None]).mean(0)
-
-
-@dataclass
-class SurfacePoints:
-    """Points glued to the skin by barycentric coordinates on triangles (thesis 5.5.3).
-
-    triangles (C,) int, barycentric (C, 3)."""
-
-    triangles: np.ndarray
-    barycentric: np.ndarray
-
-    def __post_init__(self):
-        self.triangles = np.ascontiguousarray(np.asarray(self.triangles, dtype=np.int64).ravel())
-        b = np.asarray(self.barycentric, dtype=np.float64)
-        if b.ndim == 2 and b.shape[1] == 2:  # (u, v) of vertices 1 and 2
-            b = np.column_stack([1.0 - b.sum(1), b])
-        if b.shape != (len(self.triangles), 3):
-            raise ValueError(f"barycentric must be ({len(self.triangles)}, 3) or "
-                             f"({len(self.triangles)}, 2), got {b.shape}")
-        self.barycentric = np.ascontiguousarray(b)
-
-    def __len__(self):
-        return len(self.triangles)
-
-    def at(self, pose: "Pose") -> np.ndarray:
-        """(C, 3) stage-space positions on ``pose``."""
-        return pose.track(self.triangles, self.barycentric)
-
-    def velocity(self, pose_a: "Pose", pose_b: "Pose") -> np.ndarray:
-        """(C, 3) average velocity between two poses, stage units per second."""
-        dt = pose_b.seconds - pose_a.seconds
-        if dt == 0:
-            raise ValueError("the two poses are at the same time")
-        return (self.at(pose_b) - self.at(pose_a)) / dt
-
-    def velocity_at(self, collider: "Collider", clip: str | None, time: float, step: float = 0.05):
-        """(C, 3) velocity at ``time`` by central difference over ``step`` time codes."""
-        a = collider.pose(clip, time - step)
-        b = collider.pose(clip, time + step)
-        return self.velocity(a, b)
-
-
-# -- backends ----------------------------------------------------------------------------------
-
-
-class PartsBackend:
-    """Part spheres first, then exact tests on the triangles of the parts they pass."""
-
-    name = "parts"
-
-    def raycast(self, pose, origins, directions, max_distance):
-        d = pose._data
-        dist, tri, part, bary = _ray_buffers(len(origins))
-        if len(origins) > PARALLEL_RAYS:
-            pose._skin_all()
-            pose._all_chunks()
-            kern = K._raycast_parallel
-        else:
-            kern = K._raycast
-        kern(origins, directions, max_distance, pose._points, d.triangles, pose.cull, d.faces,
-             d.chunk_offsets, d.part_chunks, pose.chunk_spheres, pose._ready, pose._version,
-             pose._lazy(), dist, tri, part, bary)
-        return pose._ray_hits(origins, directions, dist, tri, part, bary)
-
-    def sphere_contacts(self, pose, center, radius):
-        d = pose._data
-        s = pose._scratch()
-        pose._stamp += 1
-        n = K._sphere_contacts(center, radius, pose._points, d.triangles, pose.cull, d.faces,
-                               d.chunk_offsets, d.part_chunks, pose.chunk_spheres, pose._ready,
-                               pose._version, pose._lazy(), d.faces_shared, s["mark"], pose._stamp,
-                               *_contact_buffers(s))
-        return _contacts(s, n)
-
-
-class BruteForceBackend:
-    """Every triangle, no culling: the reference the culled backend must always agree with
-    (kernels of their own: game code never compiles them)."""
-
-    name = "brute"
-
-    def raycast(self, pose, origins, directions, max_distance):
-        d = pose._data
-        dist, tri, part, bary = _ray_buffers(len(origins))
-        pose._skin_all()
-        K._raycast_all(origins, directions, max_distance, pose._points, d.triangles, dist, tri, part, bary)
-        part = np.where(tri >= 0, d.face_part[np.maximum(tri, 0)], -1)
-        return pose._ray_hits(origins, directions, dist, tri, part, bary)
-
-    def sphere_contacts(self, pose, center, radius):
-        s = pose._scratch()
-        pose._skin_all()
-        return _contacts(s, K._sphere_contacts_all(center, radius, pose._points, pose._data.triangles,
-                                                   *_contact_buffers(s)))
-
-
-def _ray_buffers(R):
-    """(distance (R,), triangle (R,), part (R,), barycentric (R, 3)) for a ray kernel to fill."""
-    return np.empty(R), np.empty(R, dtype=np.int64), np.empty(R, dtype=np.int64), np.empty((R, 3))
-
-
-def _contact_buffers(s):
-    return s["tri"], s["point"], s["normal"], s["depth"], s["bary"]
-
-
-def _contacts(s, n):
-    """The first ``n`` contacts a kernel wrote into the pose's scratch ``s``, copied out."""
-    return SphereContacts(s["tri"][:n].copy(), s["point"][:n].copy(), s["normal"][:n].copy(),
-                          s["depth"][:n].copy(), s["bary"][:n].copy())
-
-
-class TrimeshBackend:
-    """trimesh on the posed mesh (embree when available), rebuilt per query: a baseline."""
-
-    name = "trimesh"
-
-    def _mesh(self, pose):
-        import trimesh
-
-        return trimesh.Trimesh(pose.points.astype(np.float64), pose._data.triangles, process=False)
-
-    def raycast(self, pose, origins, directions, max_distance):
-        m = self._mesh(pose)
-        loc, ray, tri = m.ray.intersects_location(origins, directions, multiple_hits=True)
-        R = len(origins)
-        dist = np.full(R, np.inf)
-        best = np.full(R, -1, dtype=np.int64)
-        if len(ray):
-            dd = np.einsum("ij,ij->i", loc - origins[ray], directions[ray])
-            ok = (dd >= 0) & (dd <= max_distance)
-            for r, t, f in zip(ray[ok], dd[ok], tri[ok]):
-                if t < dist[r]:
-                    dist[r], best[r] = t, f
-        bary = np.zeros((R, 3))
-        h = best >= 0
-        if h.any():
-            import trimesh
-
-            pts = origins[h] + dist[h, None] * directions[h]
-            bary[h] = trimesh.triangles.points_to_barycentric(m.triangles[best[h]], pts)
-        part = np.where(h, pose._data.face_part[np.maximum(best, 0)], -1)
-        return pose._ray_hits(origins, directions, dist, best, part, bary)
-
-    def sphere_contacts(self, pose, center, radius):
-        import trimesh
-
-        m = self._mesh(pose)
-        q = np.repeat(center[None], len(m.faces), 0)
-        cp = trimesh.triangles.closest_point(m.triangles, q)
-        dist = np.linalg.norm(cp - center, axis=1)
-        idx = np.nonzero(dist <= radius)[0]
-        nrm = center - cp[idx]
-        ln = np.linalg.norm(nrm, axis=1, keepdims=True)
-        nrm = np.divide(nrm, ln, out=np.zeros_like(nrm), where=ln > 0)
-        bary = trimesh.triangles.points_to_barycentric(m.triangles[idx], cp[idx]) if len(idx) else np.zeros((0, 3))
-        return SphereContacts(idx.astype(np.int64), cp[idx], nrm, radius - dist[idx], bary)
-
-
-BACKENDS = {b.name: b for b in (PartsBackend(), BruteForceBackend(), TrimeshBackend())}
-
-
-def get_backend(backend):
-    if backend is None or hasattr(backend, "raycast"):
-        return backend
-    try:
-        return BACKENDS[backend]
-    except KeyError:
-        raise ValueError(f"unknown backend {backend!r}; one of {sorted(BACKENDS)}") from None
 
 
 # -- pose --------------------------------------------------------------------------------------
@@ -489,7 +264,7 @@ class Pose:
         sp = SurfacePoints(triangles, barycentric)
         self._ready_faces(sp.triangles)
         out = np.empty((len(sp), 3))
-        K._surface_points(self._points, self._data.triangles, sp.triangles, sp.barycentric, out)
+        QK._surface_points(self._points, self._data.triangles, sp.triangles, sp.barycentric, out)
         return out
 
     def surface_frame(self, surface: "SurfacePoints", out=None) -> np.ndarray:
@@ -508,7 +283,7 @@ class Pose:
             raise ValueError("out must be a writable contiguous (6,) float64 array")
         if self._full != self._version:
             self._ready_faces(surface.triangles)
-        if not K._surface_frame(self._points, self._data.triangles, surface.triangles, surface.barycentric, out):
+        if not QK._surface_frame(self._points, self._data.triangles, surface.triangles, surface.barycentric, out):
             raise ValueError(f"triangle index out of range 0..{len(self._data.triangles) - 1}")
         return out
 
@@ -523,14 +298,14 @@ class Pose:
     def _normals(self, points, triangles):
         tri = np.arange(len(self._data.triangles)) if triangles is None else triangles
         out = np.empty((len(tri), 3))
-        K._face_normals(points, self._data.triangles, tri, out)
+        QK._face_normals(points, self._data.triangles, tri, out)
         return out
 
     def _ready_faces(self, tri):
         """Skin the corners of triangles ``tri`` (int64, contiguous) at this pose, if not yet;
         ValueError on an index out of range."""
         d = self._data
-        if not K._ready_faces(tri, d.face_part, self._ready, self._version, self._lazy(), self._points,
+        if not QK._ready_faces(tri, d.face_part, self._ready, self._version, self._lazy(), self._points,
                               d.part_chunks, self.chunk_spheres):
             raise ValueError(f"triangle index out of range 0..{len(d.triangles) - 1}")
 
@@ -556,7 +331,7 @@ class Pose:
 
     def _all_chunks(self):
         d = self._data
-        K._all_chunk_spheres(self._points, d.chunk_vert_offsets, d.chunk_verts, d.part_chunks,
+        QK._all_chunk_spheres(self._points, d.chunk_vert_offsets, d.chunk_verts, d.part_chunks,
                              self.chunk_spheres, self._ready, self._version)
 
     def _scratch(self):
@@ -570,7 +345,7 @@ class Pose:
     def _ray_hits(self, origins, directions, dist, tri, part, bary):
         point = np.empty(origins.shape)
         normal = np.empty(origins.shape)
-        K._hit_fill(origins, directions, dist, tri, self._points, self._data.triangles, point, normal)
+        QK._hit_fill(origins, directions, dist, tri, self._points, self._data.triangles, point, normal)
         return RayHits(dist, point, normal, tri, bary, part)
 
 

@@ -220,3 +220,69 @@ def test_no_test_module_imports_another():
             bad += [f"{f.relative_to(ROOT)}:{node.lineno} imports {n}" for n in names
                     if n.split(".")[-1].startswith("test_") or n.split(".")[-1] == "conftest"]
     assert not bad, "\n".join(bad)
+
+
+def test_no_private_name_crosses_a_floor():
+    """A ``_name`` is its floor's own: no module imports one from another floor, or reads one off a
+    module of another floor (``from colossus.runtime.kernels import query as Q; Q._raycast``); and a
+    package's face (``__init__``) re-exports no private name."""
+    mods = _modules()
+    bad = []
+    for name, path in mods.items():
+        tree = ast.parse(path.read_text(), filename=str(path))
+        is_pkg = path.name == "__init__.py"
+        pkg = name.split(".") if is_pkg else name.split(".")[:-1]
+        foreign = {}  # local name -> the other floor's module or name it is bound to
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                mod = ".".join(pkg[: len(pkg) - (node.level - 1)] + ([node.module] if node.module else [])) \
+                    if node.level else node.module
+                for a in node.names:
+                    private = a.name.startswith("_") and not a.name.startswith("__")
+                    if private and (is_pkg or floor(mod or "") != floor(name)):
+                        bad.append(f"{path.relative_to(ROOT)}:{node.lineno} imports {mod}.{a.name}")
+                    if floor(mod or "") is not None and floor(mod) != floor(name):
+                        foreign[a.asname or a.name] = f"{mod}.{a.name}"
+            elif isinstance(node, ast.Import):
+                for a in node.names:
+                    if floor(a.name) is not None and floor(a.name) != floor(name):
+                        foreign[a.asname or a.name.split(".")[0]] = a.name
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in foreign
+                    and node.attr.startswith("_") and not node.attr.startswith("__")):
+                bad.append(f"{path.relative_to(ROOT)}:{node.lineno} reads {foreign[node.value.id]}.{node.attr}")
+    assert not bad, "private names across floors:\n" + "\n".join(bad)
+
+
+def test_every_kernel_lives_with_the_kernels_and_names_its_fast_math():
+    """Every numba kernel (``@njit``, ``@numba.jit``...) lives under ``runtime/kernels/`` or in a
+    ``_kernels.py`` module beside its driver, and takes ``fastmath=`` from a named policy of
+    ``runtime/kernels/config.py`` (never a literal, never numba's default by omission)."""
+    config = ast.parse((ROOT / "runtime" / "kernels" / "config.py").read_text())
+    policies = {t.id for node in config.body if isinstance(node, ast.Assign) for t in node.targets
+                if isinstance(t, ast.Name) and t.id.startswith("FASTMATH_")}
+    assert policies
+    jits = {"njit", "jit", "generated_jit", "vectorize", "guvectorize", "stencil", "cfunc"}
+
+    def is_jit(f):
+        return (isinstance(f, ast.Name) and f.id in jits) or (isinstance(f, ast.Attribute) and f.attr in jits)
+
+    bad, found = [], 0
+    for name, path in _modules().items():
+        tree = ast.parse(path.read_text(), filename=str(path))
+        where = f"{path.relative_to(ROOT)}"
+        home = name.startswith("colossus.runtime.kernels") or path.name.endswith("_kernels.py")
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                bad += [f"{where}:{d.lineno} {node.name}: a bare @{ast.unparse(d)} (no fastmath=)"
+                        for d in node.decorator_list if is_jit(d)]
+            if not (isinstance(node, ast.Call) and is_jit(node.func)):
+                continue
+            found += 1
+            if not home:
+                bad.append(f"{where}:{node.lineno}: a kernel outside runtime/kernels/ and *_kernels.py")
+            fm = [k.value for k in node.keywords if k.arg == "fastmath"]
+            if not (fm and isinstance(fm[0], ast.Name) and fm[0].id in policies):
+                bad.append(f"{where}:{node.lineno}: fastmath= is not one of {sorted(policies)}")
+    assert found >= 50, f"found only {found} kernels: the scan is broken"
+    assert not bad, "\n".join(sorted(set(bad)))

@@ -4,9 +4,10 @@ certificate).
 
 The machinery is :mod:`runtime.certify` (shared with the import's spheres stage) on the one
 skinning kernel :mod:`runtime.kernels.skin`; the bounds and their soundness arguments are in the
-docstrings of :mod:`runtime.kernels.bounds` and :func:`runtime.certify.continuous`.  This module
-runs it on a :class:`validators.asset.LoadedAsset`, one clip and one chunk of frames at a time
-(memory ``O(vertices + chunk x joints)``), and turns the results into per-part records.
+docstrings of :mod:`runtime.kernels.bounds`, :mod:`runtime.kernels.interval` and
+:func:`runtime.certify.continuous`.  This module runs it on a
+:class:`validators.asset.LoadedAsset`, one clip and one chunk of frames at a time (memory
+``O(vertices + chunk x joints)``), and turns the results into per-part records.
 
 Sampled frames: joint transforms from ``UsdSkel.AnimQuery`` (usd-core itself).  Per (frame,
 part): test K, else test D, else the part is skinned exactly; the verdict is the exact one, and a

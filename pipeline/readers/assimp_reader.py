@@ -34,7 +34,9 @@ from .scene import Animation, Channel, Scene, SceneMesh, Skin, build
 FBX_HELPER = "_$AssimpFbx$_"
 
 
-def _flags():
+def assimp_flags():
+    """The post-processing steps this reader asks assimp for (triangulate, sort by primitive type,
+    validate the data structure)."""
     import assimp_py as A
     return A.Process_Triangulate | A.Process_SortByPType | A.Process_ValidateDataStructure
 
@@ -92,7 +94,7 @@ def read_scene(path, budget, fbx) -> Scene:
 
     ext = os.path.splitext(path)[1].lower()
     try:
-        scene = assimp_py.import_file(path, _flags())
+        scene = assimp_py.import_file(path, assimp_flags())
     except Exception as exc:  # assimp reports every parse failure as a generic exception
         msg = " ".join(str(exc).split()) or type(exc).__name__
         raise InputError(path, f"not a readable {ext.lstrip('.').upper() or 'model'} file: {msg}") from None

@@ -22,10 +22,10 @@ import math
 import numpy as np
 from numba import njit
 
-from .config import FASTMATH_PROOF as _FM
+from .config import FASTMATH_OFF, FASTMATH_PROOF
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _bracket(times, t):
     """Sample index ``i`` and weight ``a`` so the value at ``t`` is ``lerp(v[i], v[i+1], a)``;
     held (clamped) outside the sampled range, exact on a sample (``a == 0``).  (A binary search
@@ -45,7 +45,7 @@ def _bracket(times, t):
     return lo, (t - times[lo]) / (times[lo + 1] - times[lo])
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _half(x):
     """``x`` rounded to the nearest IEEE half (ties to even), as ``GfHalf`` stores it (normal
     range; UsdSkel's scales are ``half3``)."""
@@ -56,7 +56,7 @@ def _half(x):
     return np.rint(x / q) * q
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _slerp(q0x, q0y, q0z, q0w, q1x, q1y, q1z, q1w, a):
     """GfSlerp of two (x, y, z, w) quaternions exactly as usd-core interpolates ``quatf`` samples:
     the cosine from the float components (GfQuatf's float dot), shortest arc, and on the linear
@@ -82,7 +82,7 @@ def _slerp(q0x, q0y, q0z, q0w, q1x, q1y, q1z, q1w, a):
     return s0 * q0x + s1 * q1x, s0 * q0y + s1 * q1y, s0 * q0z + s1 * q1z, s0 * q0w + s1 * q1w
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _trs_matrix(tx, ty, tz, x, y, z, w, sx, sy, sz, m):
     """m (4, 4) = T R S, column-vector (``GfMatrix4d::SetRotate(quat)`` transposed, columns
     scaled)."""
@@ -104,7 +104,7 @@ def _trs_matrix(tx, ty, tz, x, y, z, w, sx, sy, sz, m):
     m[3, 3] = 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _trs_one(k, iT, aT, iR, aR, iS, aS, vt, vr, vs):
     """Translation, rotation (x, y, z, w) and scale of animated joint ``k`` between the samples
     bracketing a time (:func:`_bracket` of each channel's times): ten float64."""
@@ -128,7 +128,7 @@ def _trs_one(k, iT, aT, iR, aR, iS, aS, vt, vr, vs):
     return tx, ty, tz, x, y, z, w, sx, sy, sz
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _locals_at(times, tt, vt, tr, vr, ts, vs, anim_to_skel, rest_local, local, trs):
     """The clip's joint-local transforms at each time code ``times[n]`` (T,): ``local[n]``
     (J, 4, 4) (joints the clip does not animate keep ``rest_local``), and the animated joints'
@@ -152,7 +152,7 @@ def _locals_at(times, tt, vt, tr, vr, ts, vs, anim_to_skel, rest_local, local, t
             _trs_matrix(tx, ty, tz, x, y, z, w, sx, sy, sz, local[n, anim_to_skel[k]])
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _mul44(a, b, out):
     """out = a @ b for 4x4 (no allocation; ``out`` must not alias ``a`` or ``b``)."""
     for i in range(4):
@@ -161,7 +161,7 @@ def _mul44(a, b, out):
             out[i, k] = a0 * b[0, k] + a1 * b[1, k] + a2 * b[2, k] + a3 * b[3, k]
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=FASTMATH_PROOF)
 def _compose(local, parents, topo_order, inv_bind, geom_bind, local_to_world, skel_out, skin_out,
              world_out, folded):
     """Compose joint-local transforms (J, 4, 4) into
@@ -319,7 +319,7 @@ def compose(local, parents, topo_order=None) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _trs_matrices(t, q, s, out):
     """out (J, 4, 4) = T R S of translations (J, 3), unit quaternions (J, 4) (x, y, z, w) and
     scales (J, 3)."""

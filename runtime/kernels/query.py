@@ -1,6 +1,8 @@
 """Query kernels of the runtime: ray casts, sphere contacts, surface points (private,
-``_``-prefixed, behind the validating wrappers in :mod:`runtime.collider`).  Each has a slow
-readable numpy reference in ``tests/references/naive_queries.py``.
+``_``-prefixed, behind the validating wrappers in :mod:`runtime.collider` and the backends of
+:mod:`runtime.backends`).  Each has a slow readable numpy reference in
+``tests/references/naive_queries.py``; the triangle tests themselves (Möller-Trumbore, Ericson's
+closest point) are :mod:`runtime.kernels.triangle`'s.
 
 Queries read posed points ``(V, 3) float32`` in stage space and work in float64.  A part is made
 queryable lazily (:func:`_prepare_part`): its vertices are skinned by the one skinning kernel
@@ -14,10 +16,12 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .config import FASTMATH_OFF
 from .skin import _skin_subset
+from .triangle import closest_on_triangle, ray_triangle
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _prepare_part(p, version, lz, points, part_chunks, chunk_sph):
     """Make part ``p`` queryable at pose ``version``: skin its vertices (unless the whole skin
     is at this version), then compute its chunk spheres.  ``lz`` is what that needs (built by
@@ -32,52 +36,18 @@ def _prepare_part(p, version, lz, points, part_chunks, chunk_sph):
 # -- ray casting -------------------------------------------------------------------------------
 
 
-@njit(cache=True, inline="always")
-def _mt(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, cx, cy, cz):
-    """Möller-Trumbore on scalars, both sides: (t, u, v) or t = inf on a miss (u, v weights of
-    the 2nd and 3rd corner). Scalars only: array arguments would cost refcounting per call."""
-    e1x = bx - ax
-    e1y = by - ay
-    e1z = bz - az
-    e2x = cx - ax
-    e2y = cy - ay
-    e2z = cz - az
-    px = dy * e2z - dz * e2y
-    py = dz * e2x - dx * e2z
-    pz = dx * e2y - dy * e2x
-    det = e1x * px + e1y * py + e1z * pz
-    if det == 0.0 or not math.isfinite(det):
-        return np.inf, 0.0, 0.0
-    inv = 1.0 / det
-    sx = ox - ax
-    sy = oy - ay
-    sz = oz - az
-    u = (sx * px + sy * py + sz * pz) * inv
-    if u < 0.0 or u > 1.0:
-        return np.inf, 0.0, 0.0
-    qx = sy * e1z - sz * e1y
-    qy = sz * e1x - sx * e1z
-    qz = sx * e1y - sy * e1x
-    v = (dx * qx + dy * qy + dz * qz) * inv
-    if v < 0.0 or u + v > 1.0:
-        return np.inf, 0.0, 0.0
-    t = (e2x * qx + e2y * qy + e2z * qz) * inv
-    if t < 0.0:
-        return np.inf, 0.0, 0.0
-    return t, u, v
-
-
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _mt_face(ox, oy, oz, dx, dy, dz, points, triangles, f):
-    """:func:`_mt` on triangle ``f`` of the posed ``points`` (its corners read as float64)."""
+    """:func:`~runtime.kernels.triangle.ray_triangle` on triangle ``f`` of the posed ``points``
+    (its corners read as float64)."""
     a, b, c = triangles[f, 0], triangles[f, 1], triangles[f, 2]
-    return _mt(ox, oy, oz, dx, dy, dz,
+    return ray_triangle(ox, oy, oz, dx, dy, dz,
                np.float64(points[a, 0]), np.float64(points[a, 1]), np.float64(points[a, 2]),
                np.float64(points[b, 0]), np.float64(points[b, 1]), np.float64(points[b, 2]),
                np.float64(points[c, 0]), np.float64(points[c, 1]), np.float64(points[c, 2]))
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _chunk_spheres(p, points, chunk_vert_offsets, chunk_verts, part_chunks, chunk_sph):
     """Bounding spheres of part ``p``'s chunks (a few faces each) on the posed points:
     centre = box centre of the chunk's vertices, radius = half the box diagonal (padded).
@@ -112,7 +82,7 @@ def _chunk_spheres(p, points, chunk_vert_offsets, chunk_verts, part_chunks, chun
         chunk_sph[c, 3] = math.sqrt(r2) * (1.0 + 1e-6) + 1e-9
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FASTMATH_OFF)
 def _all_chunk_spheres(points, chunk_vert_offsets, chunk_verts, part_chunks, chunk_sph, ready, version):
     """Chunk spheres of every part not yet ``ready`` at this pose ``version``."""
     for p in prange(part_chunks.shape[0] - 1):
@@ -121,7 +91,7 @@ def _all_chunk_spheres(points, chunk_vert_offsets, chunk_verts, part_chunks, chu
             ready[p] = version
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _ray_enters(ox, oy, oz, dx, dy, dz, cx, cy, cz, rad, best):
     """Does the segment ``o + t d``, ``0 <= t <= best`` (unit d) meet the sphere?"""
     lx = cx - ox
@@ -135,7 +105,7 @@ def _ray_enters(ox, oy, oz, dx, dy, dz, cx, cy, cz, rad, best):
     return not (tca + thc < 0.0 or tca - thc > best)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _ray_one(r, origins, directions, max_distance, points, triangles, cull, faces, chunk_offsets,
              part_chunks, chunk_sph, ready, version, lz, distance, triangle, part, bary):
     ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
@@ -163,7 +133,7 @@ def _ray_one(r, origins, directions, max_distance, points, triangles, cull, face
     _ray_store(r, best, bf, bp, bu, bv, distance, triangle, part, bary)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _ray_store(r, best, bf, bp, bu, bv, distance, triangle, part, bary):
     """Write ray ``r``'s nearest hit (triangle ``bf`` < 0: a miss)."""
     if bf < 0:
@@ -182,7 +152,7 @@ def _ray_store(r, best, bf, bp, bu, bv, distance, triangle, part, bary):
         bary[r, 2] = bv
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _raycast(origins, directions, max_distance, points, triangles, cull, faces, chunk_offsets,
              part_chunks, chunk_sph, ready, version, lz, distance, triangle, part, bary):
     """Nearest hit per ray (serial; the wrapper picks this for few rays). Part spheres, then
@@ -193,7 +163,7 @@ def _raycast(origins, directions, max_distance, points, triangles, cull, faces, 
                  triangle, part, bary)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FASTMATH_OFF)
 def _raycast_parallel(origins, directions, max_distance, points, triangles, cull, faces,
                       chunk_offsets, part_chunks, chunk_sph, ready, version, lz, distance,
                       triangle, part, bary):
@@ -204,7 +174,7 @@ def _raycast_parallel(origins, directions, max_distance, points, triangles, cull
                  triangle, part, bary)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _raycast_all(origins, directions, max_distance, points, triangles, distance, triangle, part, bary):
     """Nearest hit per ray over every triangle, no culling: the brute-force backend (the
     reference the culled kernels are tested against).  A kernel of its own, so game code, which
@@ -227,98 +197,7 @@ def _raycast_all(origins, directions, max_distance, points, triangles, distance,
 # -- sphere contacts ---------------------------------------------------------------------------
 
 
-@njit(cache=True, inline="always")
-def _closest_on_triangle(px, py, pz, points, ia, ib, ic, out):
-    """Ericson's ClosestPtPointTriangle (Real-Time Collision Detection 5.1.5), with barycentrics.
-
-    out[:3] closest point, out[3:6] barycentric (weights of vertices ia, ib, ic)."""
-    ax, ay, az = np.float64(points[ia, 0]), np.float64(points[ia, 1]), np.float64(points[ia, 2])
-    bx, by, bz = np.float64(points[ib, 0]), np.float64(points[ib, 1]), np.float64(points[ib, 2])
-    cx, cy, cz = np.float64(points[ic, 0]), np.float64(points[ic, 1]), np.float64(points[ic, 2])
-    abx, aby, abz = bx - ax, by - ay, bz - az
-    acx, acy, acz = cx - ax, cy - ay, cz - az
-    apx, apy, apz = px - ax, py - ay, pz - az
-    d1 = abx * apx + aby * apy + abz * apz
-    d2 = acx * apx + acy * apy + acz * apz
-    u = 1.0
-    v = 0.0
-    w = 0.0
-    done = False
-    if d1 <= 0.0 and d2 <= 0.0:  # vertex region A
-        done = True
-    if not done:
-        bpx, bpy, bpz = px - bx, py - by, pz - bz
-        d3 = abx * bpx + aby * bpy + abz * bpz
-        d4 = acx * bpx + acy * bpy + acz * bpz
-        if d3 >= 0.0 and d4 <= d3:  # vertex region B
-            u, v, w = 0.0, 1.0, 0.0
-            done = True
-    if not done:
-        vc = d1 * d4 - d3 * d2
-        if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0 and d1 - d3 > 0.0:  # edge AB
-            t = d1 / (d1 - d3)
-            u, v, w = 1.0 - t, t, 0.0
-            done = True
-    if not done:
-        cpx, cpy, cpz = px - cx, py - cy, pz - cz
-        d5 = abx * cpx + aby * cpy + abz * cpz
-        d6 = acx * cpx + acy * cpy + acz * cpz
-        if d6 >= 0.0 and d5 <= d6:  # vertex region C
-            u, v, w = 0.0, 0.0, 1.0
-            done = True
-    if not done:
-        vb = d5 * d2 - d1 * d6
-        if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0 and d2 - d6 > 0.0:  # edge AC
-            t = d2 / (d2 - d6)
-            u, v, w = 1.0 - t, 0.0, t
-            done = True
-    if not done:
-        va = d3 * d6 - d5 * d4
-        e0 = d4 - d3
-        e1 = d5 - d6
-        if va <= 0.0 and e0 >= 0.0 and e1 >= 0.0 and e0 + e1 > 0.0:  # edge BC
-            t = e0 / (e0 + e1)
-            u, v, w = 0.0, 1.0 - t, t
-            done = True
-    if not done:
-        den = va + vb + vc
-        if den > 0.0:  # face region
-            v = vb / den
-            w = vc / den
-            u = 1.0 - v - w
-        else:  # degenerate (collinear) triangle: nearest of the three edges
-            bestd = np.inf
-            for e in range(3):
-                if e == 0:
-                    sx, sy, sz, ex, ey, ez = ax, ay, az, bx, by, bz
-                elif e == 1:
-                    sx, sy, sz, ex, ey, ez = bx, by, bz, cx, cy, cz
-                else:
-                    sx, sy, sz, ex, ey, ez = cx, cy, cz, ax, ay, az
-                lx, ly, lz = ex - sx, ey - sy, ez - sz
-                ll = lx * lx + ly * ly + lz * lz
-                t = 0.0
-                if ll > 0.0:
-                    t = min(1.0, max(0.0, ((px - sx) * lx + (py - sy) * ly + (pz - sz) * lz) / ll))
-                qx, qy, qz = sx + t * lx - px, sy + t * ly - py, sz + t * lz - pz
-                dd = qx * qx + qy * qy + qz * qz
-                if dd < bestd:
-                    bestd = dd
-                    if e == 0:
-                        u, v, w = 1.0 - t, t, 0.0
-                    elif e == 1:
-                        u, v, w = 0.0, 1.0 - t, t
-                    else:
-                        u, v, w = t, 0.0, 1.0 - t
-    out[0] = u * ax + v * bx + w * cx
-    out[1] = u * ay + v * by + w * cy
-    out[2] = u * az + v * bz + w * cz
-    out[3] = u
-    out[4] = v
-    out[5] = w
-
-
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _apart(spheres, k, px, py, pz, radius):
     """Is sphere ``k`` of ``spheres`` (n, 4) beyond ``radius`` of ``(px, py, pz)``?"""
     dx = spheres[k, 0] - px
@@ -328,7 +207,7 @@ def _apart(spheres, k, px, py, pz, radius):
     return dx * dx + dy * dy + dz * dz > rr * rr
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _box_gap2(px, py, pz, points, ia, ib, ic):
     """Squared distance from ``(px, py, pz)`` to the bounding box of triangle (ia, ib, ic): a
     lower bound of the squared distance to the triangle, so a face whose box is beyond the
@@ -346,7 +225,7 @@ def _box_gap2(px, py, pz, points, ia, ib, ic):
     return g
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n, tri_out, point_out,
                    normal_out, depth_out, bary_out):
     """Record triangle ``f`` (closest point and barycentric in ``tmp``) as contact ``n``.
@@ -383,12 +262,12 @@ def _write_contact(f, px, py, pz, radius, d2, points, triangles, tmp, n, tri_out
     return n + 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", fastmath=FASTMATH_OFF)
 def _face_contact(f, ia, ib, ic, px, py, pz, radius, r2, points, triangles, tmp, n, tri_out, point_out,
                   normal_out, depth_out, bary_out):
     """Test triangle ``f`` (corners ia, ib, ic) against the sphere: record it as contact ``n``
     when its closest point (Ericson's, into ``tmp``) is within the radius; returns the count."""
-    _closest_on_triangle(px, py, pz, points, ia, ib, ic, tmp)
+    closest_on_triangle(px, py, pz, points, ia, ib, ic, tmp)
     dx, dy, dz = px - tmp[0], py - tmp[1], pz - tmp[2]
     d2 = dx * dx + dy * dy + dz * dz
     if d2 <= r2:
@@ -397,7 +276,7 @@ def _face_contact(f, ia, ib, ic, px, py, pz, radius, r2, points, triangles, tmp,
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offsets, part_chunks,
                      chunk_sph, ready, version, lz, dedup, mark, stamp, tri_out, point_out,
                      normal_out, depth_out, bary_out):
@@ -434,7 +313,7 @@ def _sphere_contacts(center, radius, points, triangles, cull, faces, chunk_offse
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _sphere_contacts_all(center, radius, points, triangles, tri_out, point_out, normal_out, depth_out,
                          bary_out):
     """:func:`_sphere_contacts` over every triangle, no culling: the brute-force backend (the
@@ -453,7 +332,7 @@ def _sphere_contacts_all(center, radius, points, triangles, tri_out, point_out, 
 # -- surface points ----------------------------------------------------------------------------
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _ready_faces(tri, face_part, ready, version, lz, points, part_chunks, chunk_sph):
     """Make the corners of triangles ``tri`` valid at pose ``version`` without skinning the
     rest: prepare (:func:`_prepare_part`) each holding part not yet ``ready``.  Returns False,
@@ -472,7 +351,7 @@ def _ready_faces(tri, face_part, ready, version, lz, points, part_chunks, chunk_
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _surface_frame(points, triangles, tri, bary, out):
     """The frame of surface points (tri (C,), barycentric bary (C, 3)) on the posed ``points``
     (V, 3) float32: out (6,) = [centroid of the points, unit mean of their triangles' unit
@@ -516,7 +395,7 @@ def _surface_frame(points, triangles, tri, bary, out):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _surface_points(points, triangles, tri, bary, out):
     """World positions of barycentric points on triangles: out[i] = sum_k bary[i,k] * p[tri[i],k]."""
     for i in range(tri.shape[0]):
@@ -527,7 +406,7 @@ def _surface_points(points, triangles, tri, bary, out):
                          + bary[i, 2] * points[c3, c])
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _face_normals(points, triangles, tri, out):
     """Unit geometric normals (e1 x e2, counter-clockwise = outward) of triangles ``tri``;
     zero for a degenerate triangle."""
@@ -554,7 +433,7 @@ def _face_normals(points, triangles, tri, out):
             out[i, 2] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _hit_fill(origins, directions, distance, triangle, points, triangles, point, normal):
     """Hit points and normals of the rays that hit (NaN for misses)."""
     for r in range(origins.shape[0]):

@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .config import FASTMATH_PROOF as _FM
+from .config import FASTMATH_PROOF
 
 #: The wrappers use the multi-threaded kernels only above this many vertex-influence evaluations
 #: (about 10 ms of one thread): below it one thread is faster than waking a pool (on a busy
@@ -48,7 +48,7 @@ PARALLEL_WORK = 4_000_000
 FARTHEST_BLOCK = 1 << 15
 
 
-@njit(cache=True, fastmath=_FM, inline="always")
+@njit(cache=True, fastmath=FASTMATH_PROOF, inline="always")
 def _lbs(v, f, points, ji, jw, m):
     """Skinned position of vertex ``v`` under pose ``f`` of the folded transforms ``m``
     (F, J, 12); returns three float64.  Zero weights are padding (skipped).  Inlined into each
@@ -72,7 +72,7 @@ def _lbs(v, f, points, ji, jw, m):
     return ax, ay, az
 
 
-@njit(cache=True, parallel=True, fastmath=_FM)
+@njit(cache=True, parallel=True, fastmath=FASTMATH_PROOF)
 def _skin_frames(points, ji, jw, m, out):
     """out (F, n, 3) float32 = every vertex skinned by every pose of ``m`` (F, J, 12);
     parallel over (pose, vertex)."""
@@ -86,7 +86,7 @@ def _skin_frames(points, ji, jw, m, out):
         out[f, v, 2] = z
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=FASTMATH_PROOF)
 def _skin_frames_serial(points, ji, jw, m, out):
     """:func:`_skin_frames` on one thread (below :data:`PARALLEL_WORK`)."""
     for f in range(m.shape[0]):
@@ -97,7 +97,7 @@ def _skin_frames_serial(points, ji, jw, m, out):
             out[f, v, 2] = z
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=FASTMATH_PROOF)
 def _skin_dist2(points, ji, jw, m, centers, out):
     """out (F, n) float64 = squared distance of every vertex skinned by pose f of ``m`` from
     ``centers[f]`` (F, 3): the farthest-vertex search of :func:`part_farthest` without storing
@@ -108,7 +108,7 @@ def _skin_dist2(points, ji, jw, m, centers, out):
             out[f, v] = (x - centers[f, 0]) ** 2 + (y - centers[f, 1]) ** 2 + (z - centers[f, 2]) ** 2
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=FASTMATH_PROOF)
 def _skin_subset(verts, lo, hi, points, ji, jw, m, out):
     """out[verts[i]] (n, 3) float32 for ``lo <= i < hi``: vertices skinned by pose 0 of ``m``."""
     for i in range(lo, hi):

@@ -118,7 +118,7 @@ def naive_skin(rest, ji, jw, skel, inv_bind, geom_bind, local_to_world):
     return (out @ local_to_world.T)[:, :3]
 
 
-# -- character controller (runtime.controller's kernels) --------------------------------------
+# -- character controller (runtime.kernels.contact, behind runtime.controller) -----------------
 
 
 def naive_push(normal, pen, tolerance=0.0, cap=np.inf):

@@ -15,7 +15,7 @@ import pytest
 from colossus.runtime import load_collider
 from colossus.runtime.controller import (FALLING, HANGING, HOLDING, SLIDING, STANDING, CharacterController,
                                 Intent, carry_point, resolve_push)
-from colossus.runtime.controller import _along
+from colossus.runtime.kernels.contact import _along
 from colossus.runtime.script import start_position
 from references.usd_reference import UsdSkelReference
 from references.naive_queries import (closest_point_on_triangles, inside_closed_mesh, naive_along,

@@ -12,6 +12,7 @@ from references import naive
 from colossus.runtime import certify as C
 from colossus.runtime.asset import ClipData
 from colossus.runtime.kernels import bounds as B
+from colossus.runtime.kernels import interval as IV
 from colossus.runtime.kernels import pose as PK
 from colossus.runtime.kernels import skin as SK
 
@@ -151,8 +152,8 @@ def test_chain_bounds_numpy_path_equals_the_kernel():
     outs = []
     for compiled in (True, False):
         e = [np.zeros((I, M)) for _ in range(5)]
-        B.chain_bounds(fac["L0"], fac["L1"], fac["Li0"], fac["Li1"], fac["fw"], fac["iv"], fac["dt"], fac["eps"],
-                       off, pj, pd, bd.pj_center, bd.pj_radius, pair_part, bd.part_centers, *e, compiled=compiled)
+        IV.chain_bounds(fac["L0"], fac["L1"], fac["Li0"], fac["Li1"], fac["fw"], fac["iv"], fac["dt"], fac["eps"],
+                        off, pj, pd, bd.pj_center, bd.pj_radius, pair_part, bd.part_centers, *e, compiled=compiled)
         outs.append(e)
     assert M > 10 and np.diff(off).max() >= 3
     for x, y in zip(*outs):
@@ -184,7 +185,7 @@ def test_factor_terms_match_naive(compiled):
     s[:3, 0] = s[0, 0]             # constant over the first intervals
     L = np.repeat(rest[None], T, 0)
     L[:, anim] = naive.trs(t, q / np.linalg.norm(q, axis=-1, keepdims=True), s)
-    got = B.factor_terms(L, t, q, s, anim, rest, C.OMEGA_MARGIN, C.ALPHA_MARGIN, compiled=compiled)
+    got = IV.factor_terms(L, t, q, s, anim, rest, C.OMEGA_MARGIN, C.ALPHA_MARGIN, compiled=compiled)
     want = naive.factor_terms(L, t, q, s, anim, rest, C.OMEGA_MARGIN, C.ALPHA_MARGIN)
     ok = np.abs(np.linalg.det(L[..., :3, :3])) > 1e-12
     np.testing.assert_allclose(got[0][ok], want[0][ok], rtol=1e-9, atol=1e-9)

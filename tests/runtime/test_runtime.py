@@ -8,8 +8,8 @@ import pytest
 from pxr import Usd, Vt
 
 from colossus.runtime import ColliderError, SphereContacts, SurfacePoints, load_collider
-from colossus.runtime import kernels as K
-from colossus.runtime.collider import PARALLEL_RAYS
+from colossus.runtime.backends import PARALLEL_RAYS
+from colossus.runtime.kernels.triangle import closest_on_triangle
 from references.naive_queries import (closest_point_on_triangles, naive_raycast, naive_skin,
                                 naive_sphere_contacts, ray_triangles)
 from references.usd_reference import UsdSkelReference, read_parts
@@ -456,7 +456,7 @@ def test_closest_point_kernel():
         p = rng.normal(size=3) * 1.5
         q_ref, b_ref = closest_point_on_triangles(p, *(pts[tris[:, k]].astype(np.float64) for k in range(3)))
         for f in range(len(tris)):
-            K._closest_on_triangle(p[0], p[1], p[2], pts, tris[f, 0], tris[f, 1], tris[f, 2], out)
+            closest_on_triangle(p[0], p[1], p[2], pts, tris[f, 0], tris[f, 1], tris[f, 2], out)
             assert np.isclose(np.linalg.norm(out[:3] - p), np.linalg.norm(q_ref[f] - p), atol=1e-9)
             assert np.isclose(out[3:].sum(), 1) and (out[3:] >= -1e-12).all()
             assert np.allclose(out[3:] @ pts[tris[f]].astype(np.float64), out[:3], atol=1e-9)
