@@ -69,10 +69,10 @@ from scipy.spatial import cKDTree
 
 from colossus.runtime.kernels.skin import skin_frames
 
-from ..errors import UsageError
 from ..geometry.collapse import apply_collapses, vertex_quadrics
 from ..geometry.surface_distance import deviation_bound, nearest_on_candidates
 from ..model import SkinnedMesh, skel_transforms
+from ..options import parse_max_deviation, resolve_max_deviation
 from ..tolerances import (DEVIATION_MAX_DEPTH, DEVIATION_PAD, DEVIATION_REFINE, DEVIATION_RESOLUTION,
                           SIMPLIFY_BONE_BOUNDARY, model_scale)
 from . import StageReport
@@ -102,34 +102,6 @@ FLOOR_FRACTION = 0.005
 MIN_FACES = 64
 #: Skinned poses kept in memory by the deviation when they fit in this many bytes.
 SKIN_CACHE_BYTES = 512 * 2 ** 20
-
-
-# ------------------------------------------------------------------------------ options
-def parse_max_deviation(value):
-    """``--max-deviation``: ``(length, relative)`` from ``"0.01"`` (stage units) or ``"0.5%"``
-    (percent of the model size); None for None.  Raises :class:`UsageError`."""
-    if value is None or value == "":
-        return None
-    if isinstance(value, tuple):
-        return value
-    text = str(value).strip()
-    rel = text.endswith("%")
-    try:
-        v = float(text[:-1] if rel else text)
-    except ValueError:
-        raise UsageError(f"--max-deviation {value!r}: expected a length in stage units or a percentage "
-                         "of the model size, e.g. 0.01 or 0.5%") from None
-    if not (np.isfinite(v) and v > 0):
-        raise UsageError(f"--max-deviation {value!r}: expected a positive length")
-    return v, rel
-
-
-def resolve_max_deviation(spec, size: float) -> float | None:
-    """The limit in stage units: ``spec`` from :func:`parse_max_deviation`, ``size`` the model size."""
-    if spec is None:
-        return None
-    v, rel = spec
-    return v * size / 100.0 if rel else v
 
 
 # ------------------------------------------------------------------------------ poses
@@ -515,7 +487,7 @@ def simplify(mesh: SkinnedMesh, target_faces: int | None = None, max_deviation=N
         Face count to reach (at most; fewer when ``max_deviation`` stops it first).
     max_deviation : float, str or (float, bool), optional
         Limit of the deviation bound: stage units, or ``"D%"`` of the model size
-        (:func:`parse_max_deviation`).
+        (:func:`colossus.pipeline.options.parse_max_deviation`).
     max_influences : int
         Influences kept per proxy vertex.
 

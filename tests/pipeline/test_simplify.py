@@ -24,7 +24,8 @@ from colossus.pipeline.errors import UsageError
 from colossus.pipeline.geometry.collapse import apply_collapses, interior_vertices
 from colossus.pipeline.geometry.surface_distance import (cover_radius, deviation_bound, nearest_on_candidates, piece_bounds,
                                                 sample_distances)
-from colossus.pipeline.stages.simplify import _collapses, _shells, deviation, mesh_poses, parse_max_deviation, simplify
+from colossus.pipeline.options import parse_max_deviation
+from colossus.pipeline.stages.simplify import _collapses, _shells, deviation, mesh_poses, simplify
 
 ROOT = Path(__file__).resolve().parents[2]
 CORPUS = ROOT.parent / "shared" / "corpus"
