@@ -3,7 +3,7 @@
 The node-graph readers (glTF, and every format assimp reads) describe what the file holds as a
 :class:`Scene`: nodes with their rest local transforms, meshes (skinned or not) attached to
 nodes, and animation channels with their own key times, values and interpolation.
-:func:`build` then decides, in one place for every format:
+:func:`~.build.build` then decides, in one place for every format:
 
 * **which meshes move with the skeleton**: every skinned mesh, and every mesh whose node lies
   under a joint (rigid skinning through the hierarchy: bound with weight 1 to the nearest joint
@@ -25,14 +25,14 @@ nodes, and animation channels with their own key times, values and interpolation
 
 Three modules: :mod:`.graph` (the records a reader fills, :func:`check_scene`, world
 transforms), :mod:`.timeline` (channel sampling, the frame grid, the resampling bound) and
-:mod:`.build` (:func:`build`, one function per step).
+:mod:`.build` (:func:`~.build.build`, one function per step).  ``build`` is the module: the
+readers import the function as ``from .scene.build import build``.
 """
 
 from __future__ import annotations
 
-from .build import build
 from .graph import INTERPOLATIONS, Animation, Channel, Scene, SceneMesh, Skin, check_scene
 from .timeline import DEFAULT_FPS, GRID_RATES, MAX_FRAMES, choose_fps, grid_frames, sample_channel
 
-__all__ = ["Animation", "Channel", "Scene", "SceneMesh", "Skin", "INTERPOLATIONS", "check_scene", "build",
+__all__ = ["Animation", "Channel", "Scene", "SceneMesh", "Skin", "INTERPOLATIONS", "check_scene",
            "GRID_RATES", "DEFAULT_FPS", "MAX_FRAMES", "choose_fps", "grid_frames", "sample_channel"]

@@ -1,6 +1,6 @@
 """A node-graph reader's scene: the records it fills (:class:`Scene`, :class:`SceneMesh`,
 :class:`Skin`, :class:`Animation`, :class:`Channel`), the world transforms of its hierarchy
-(:func:`_world`) and what :func:`~colossus.pipeline.readers.scene.build` assumes of it, checked
+(:func:`_world`) and what :func:`~colossus.pipeline.readers.scene.build.build` assumes of it, checked
 once for every format (:func:`check_scene`)."""
 
 from __future__ import annotations
@@ -175,7 +175,7 @@ def _bounded(a) -> bool:
 
 
 def check_scene(scene: Scene, path) -> None:
-    """What :func:`build` assumes of a reader's scene, checked once for every node-graph format
+    """What :func:`~.build.build` assumes of a reader's scene, checked once for every node-graph format
     (a corrupt or hostile file otherwise ends in a singular-matrix failure, a NaN warning or an
     index error inside the builder).  Raises :class:`InputError` naming ``path`` and the part:
     node transforms and the world transforms they compose to, mesh points and triangles, skin
