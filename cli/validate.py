@@ -95,7 +95,7 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
     except KeyError as e:
         raise click.UsageError(f"--severity: unknown rule code {e}")
 
-    from colossus.pipeline.stages.simplify import parse_max_deviation
+    from colossus.pipeline.options import parse_max_deviation
     parse_max_deviation(max_deviation)  # a bad value is a usage error (exit 2) before any asset is read
     if source is not None and not __import__("os").path.isfile(source):
         click.echo(f"error: --source {source}: no such file", err=True)

@@ -15,12 +15,13 @@ from . import __version__
 from .errors import InputError, UsageError
 from .model import SkinnedMesh
 from .isolation import read_isolated
+from .options import parse_max_deviation
 from .stages import StageReport
 from .stages.bake import bake
 from .stages.bind import UNWEIGHTED_POLICIES, bind
 from .stages.orient import orient
 from .stages.parts import parts
-from .stages.simplify import parse_max_deviation, simplify
+from .stages.simplify import simplify
 from .stages.spheres import spheres
 from .stages.weld import weld
 from .stages.quantize import quantize

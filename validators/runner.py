@@ -59,7 +59,7 @@ class Context:
         self.slack_ratio = float(opts["slack_ratio"])
         self.chunk_frames = opts["chunk_frames"]
         self.clip_proofs = opts["clip_proofs"]
-        from colossus.pipeline.stages.simplify import parse_max_deviation
+        from colossus.pipeline.options import parse_max_deviation
         #: ``(length, relative)`` or None: the COL701 limit (``--max-deviation``)
         self.max_deviation = parse_max_deviation(opts["max_deviation"])
         self.source = opts["source"]

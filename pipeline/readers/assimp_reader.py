@@ -1,7 +1,7 @@
 """Reader for every other format assimp reads (FBX, Collada, DirectX ``.x``, MD5, ...), through ``assimp-py``.
 
 The file becomes a :class:`~pipeline.readers.scene.Scene` (assimp's node graph, meshes with their
-bones' offset matrices, animation channels); :func:`~pipeline.readers.scene.build` chooses the
+bones' offset matrices, animation channels); :func:`~pipeline.readers.scene.build.build` chooses the
 meshes and joints and samples the clips on the frame grid, as for every node-graph format.
 
 * A mesh's bind-time mesh-to-world transform is its node's world transform; a bone's offset
@@ -29,7 +29,8 @@ from ..errors import InputError
 from .common import AllocationBudget, check_finite, check_input_file
 from .fbx_header import read_anim_stacks, read_global_settings, read_inherit_types, read_morph_geometry
 from .collada_xml import read_clips, read_skins
-from .scene import Animation, Channel, Scene, SceneMesh, Skin, build
+from .scene import Animation, Channel, Scene, SceneMesh, Skin
+from .scene.build import build
 
 FBX_HELPER = "_$AssimpFbx$_"
 

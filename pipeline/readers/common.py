@@ -1,4 +1,5 @@
-"""Helpers shared by the readers: input checks, allocation cap, influence packing, clip names."""
+"""Helpers shared by the readers: input checks, allocation cap, influence packing, clip names
+(:func:`unique_name`, which ``stages.write`` uses for prim names too)."""
 
 from __future__ import annotations
 
@@ -112,15 +113,19 @@ def _pack_sorted(n, vertex, joint, weight):
     return ji.astype(np.int32), jw.astype(np.float32)
 
 
-def clip_name(raw: str, taken: set) -> str:
-    """A clip's name as shown to users: FBX ``Armature|walk`` becomes ``walk``; duplicates get a suffix."""
-    name = (raw or "").split("|")[-1].strip() or "clip"
-    base, i = name, 1
+def unique_name(base: str, taken: set) -> str:
+    """``base``, or the first of ``base_2``, ``base_3``, ... not in ``taken``; added to ``taken``."""
+    name, i = base, 1
     while name in taken:
         i += 1
         name = f"{base}_{i}"
     taken.add(name)
     return name
+
+
+def clip_name(raw: str, taken: set) -> str:
+    """A clip's name as shown to users: FBX ``Armature|walk`` becomes ``walk``; duplicates get a suffix."""
+    return unique_name((raw or "").split("|")[-1].strip() or "clip", taken)
 
 
 def check_finite(path, what: str, arr: np.ndarray) -> None:

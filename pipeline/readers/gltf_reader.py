@@ -3,7 +3,7 @@
 Read directly rather than through assimp because what a collider needs from glTF is exactly what
 assimp does not hand over: each animation sampler's interpolation (LINEAR, STEP, CUBICSPLINE)
 and its raw key times in seconds, the morph targets, several skins, and the node each mesh hangs
-from.  The file becomes a :class:`~pipeline.readers.scene.Scene`; :func:`~pipeline.readers.scene.build`
+from.  The file becomes a :class:`~pipeline.readers.scene.Scene`; :func:`~pipeline.readers.scene.build.build`
 does the rest (joints, rigid meshes, the frame grid).
 
 Followed from the glTF 2.0 specification (https://registry.khronos.org/glTF/specs/2.0/glTF-2.0.html):
@@ -33,7 +33,8 @@ import numpy as np
 from ..errors import InputError, one_line
 from ..xforms import compose_trs
 from .common import AllocationBudget, check_finite, check_input_file
-from .scene import Animation, Channel, Scene, SceneMesh, Skin, build
+from .scene import Animation, Channel, Scene, SceneMesh, Skin
+from .scene.build import build
 
 _COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}

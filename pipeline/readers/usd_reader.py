@@ -1,7 +1,7 @@
 """Reader for USD (``.usd``, ``.usda``, ``.usdc``, ``.usdz``) skinned meshes, through usd-core's UsdSkel.
 
 The stage becomes a :class:`~pipeline.readers.scene.Scene` and goes through the same
-:func:`~pipeline.readers.scene.build` as every node-graph format:
+:func:`~pipeline.readers.scene.build.build` as every node-graph format:
 
 * Nodes: one per Skeleton prim (its local-to-world transform, animated when the prims above it
   are), with that skeleton's joints under it (their ``restTransforms``, what UsdSkel poses a
@@ -28,7 +28,8 @@ from ..errors import InputError, one_line
 from ..tolerances import LARGEST_COORDINATE
 from ..xforms import decompose_trs, degenerate
 from .common import AllocationBudget, check_finite, check_input_file
-from .scene import Animation, Channel, Scene, SceneMesh, Skin, build
+from .scene import Animation, Channel, Scene, SceneMesh, Skin
+from .scene.build import build
 
 
 def _m44(values) -> np.ndarray:

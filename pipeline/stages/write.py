@@ -35,13 +35,9 @@ RESERVED = (schema.SKELETON_NAME, schema.COLLIDER_NAME)
 
 def _ident(name: str, taken: set) -> str:
     from pxr import Tf
-    base = Tf.MakeValidIdentifier(str(name) or "_")
-    out, i = base, 1
-    while out in taken:
-        i += 1
-        out = f"{base}_{i}"
-    taken.add(out)
-    return out
+
+    from ..readers.common import unique_name
+    return unique_name(Tf.MakeValidIdentifier(str(name) or "_"), taken)
 
 
 def joint_paths(names, parents) -> list:

@@ -24,7 +24,10 @@ from colossus.pipeline.errors import UsageError
 from colossus.pipeline.geometry.collapse import apply_collapses, interior_vertices
 from colossus.pipeline.geometry.surface_distance import (cover_radius, deviation_bound, nearest_on_candidates, piece_bounds,
                                                 sample_distances)
-from colossus.pipeline.stages.simplify import _collapses, _shells, deviation, mesh_poses, parse_max_deviation, simplify
+from colossus.pipeline.geometry.decimate import _collapses, shells
+from colossus.pipeline.geometry.deviation import deviation, mesh_poses
+from colossus.pipeline.options import parse_max_deviation
+from colossus.pipeline.stages.simplify import simplify
 
 ROOT = Path(__file__).resolve().parents[2]
 CORPUS = ROOT.parent / "shared" / "corpus"
@@ -131,7 +134,7 @@ def test_apply_collapses_matches_the_naive_replay_and_keeps_shells_closed():
         mine = np.sort(r.positions[r.triangles].reshape(-1, 9).astype(np.float64), axis=1)
         ref = np.sort(P[np.array(T)].reshape(-1, 9), axis=1)
         np.testing.assert_allclose(mine[np.lexsort(mine.T.round(4))], ref[np.lexsort(ref.T.round(4))], atol=1e-5)
-        _, count, closed, euler = _shells(r.triangles, len(r.positions))
+        _, count, closed, euler = shells(r.triangles, len(r.positions))
         assert count == 1 and closed.all() and euler[0] == 2
         assert len(r.triangles) >= 4 and len(r.triangles) == len(tris) - 2 * r.accepted.sum()
 
@@ -254,15 +257,15 @@ def test_max_deviation_stops_the_decimation_within_the_limit():
 def test_bone_boundary_penalty_makes_fewer_collapses_across_bones(tube):
     """The embedding's part steps make collapses across part boundaries wait: fewer accepted
     collapses join vertices of different dominant bones than without the steps."""
-    from colossus.pipeline.stages import simplify as S
+    from colossus.pipeline.geometry import decimate as D
 
-    with_penalty = S.simplify(tube, target_faces=300)[1].counts["bone_crossing_collapses"]
-    saved = S.SIMPLIFY_BONE_BOUNDARY
+    with_penalty = simplify(tube, target_faces=300)[1].counts["bone_crossing_collapses"]
+    saved = D.SIMPLIFY_BONE_BOUNDARY
     try:
-        S.SIMPLIFY_BONE_BOUNDARY = 0.0
-        without = S.simplify(tube, target_faces=300)[1].counts["bone_crossing_collapses"]
+        D.SIMPLIFY_BONE_BOUNDARY = 0.0
+        without = simplify(tube, target_faces=300)[1].counts["bone_crossing_collapses"]
     finally:
-        S.SIMPLIFY_BONE_BOUNDARY = saved
+        D.SIMPLIFY_BONE_BOUNDARY = saved
     assert saved > 0 and with_penalty < without
 
 
@@ -288,7 +291,7 @@ def test_skin_transfer_keeps_each_shell_to_its_own_skin():
     m, _ = bind(m, 4)
     p, rep = simplify(m, target_faces=400)
     assert rep.counts["closed_shells_out"] == 2 and p.face_count <= 400
-    shell = _shells(p.triangles.astype(np.int64), p.vertex_count)[0]
+    shell = shells(p.triangles.astype(np.int64), p.vertex_count)[0]
     vshell = np.empty(p.vertex_count, np.int64)
     vshell[p.triangles.ravel()] = np.repeat(shell, 3)
     y = p.positions[:, 1] + off[1]
@@ -408,7 +411,7 @@ def test_target_faces_2000_done_when(src, proxies, tmp_path):
     assert mesh.GetCustomDataByKey(schema.PROXY_SOURCE_FACES) == simp["faces_in"]
     assert mesh.GetCustomDataByKey(schema.PROXY_MAX_DEVIATION) == pytest.approx(simp["deviation"])
     tris = np.array(UsdGeom.Mesh(mesh).GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
-    _, _, closed, _ = _shells(tris, int(tris.max()) + 1)
+    _, _, closed, _ = shells(tris, int(tris.max()) + 1)
     assert int(closed.sum()) == simp["closed_shells_in"]
     if simp["faces_out"] == simp["faces_in"]:
         assert simp["deviation"] == 0.0

@@ -1,0 +1,190 @@
+"""When a clip is sampled: channel sampling with each channel's own interpolation
+(:func:`sample_channel`), the frame grid (:func:`choose_fps`, :func:`grid_frames`), the joint
+locals at given times (:func:`_joint_locals`) and the error bound of a clip whose keys fall
+between frames (:func:`_resampling_bound`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...errors import InputError
+from ...model import skel_transforms
+from ...tolerances import GRID_KEY_FRAMES
+from ...xforms import compose_trs, decompose_trs, degenerate, slerp
+from .graph import _BAD_XFORM, Channel, _world
+
+#: Frame rates tried, in order, for a file's own grid: the first on which every key falls wins.
+GRID_RATES = (24.0, 30.0, 25.0, 60.0, 48.0, 50.0, 120.0, 23.976, 29.97, 59.94, 90.0, 100.0, 240.0,
+              12.0, 15.0, 10.0, 8.0)
+#: The grid's rate when no rate holds the keys (the contract's default).
+DEFAULT_FPS = 30.0
+#: Longest clip, in grid frames (a corrupt key time must not make the grid itself the allocation).
+MAX_FRAMES = 10_000_000
+
+
+def sample_channel(ch: Channel, seconds: np.ndarray, key_tolerance: float = 0.0) -> np.ndarray:
+    """The channel's value at ``seconds`` (clamped to its first and last key), with its own
+    interpolation.  Returns ``(f, c)`` float64; rotations are unit quaternions (x, y, z, w).
+
+    A sample within ``key_tolerance`` seconds of a key takes that key's value exactly (no
+    interpolation round-off; a file's float32 key times are never bit-equal to ``frame / fps``)."""
+    t = np.asarray(ch.times, dtype=np.float64)
+    v = np.asarray(ch.values, dtype=np.float64)
+    cubic = ch.interpolation == "CUBICSPLINE"
+    vals = v[:, 1] if cubic else v
+    seconds = np.asarray(seconds, dtype=np.float64)
+    if len(t) == 1:
+        return np.repeat(vals[:1], len(seconds), axis=0)
+    j = np.minimum(np.searchsorted(t, seconds - key_tolerance), len(t) - 1)
+    on = np.abs(t[j] - seconds) <= key_tolerance
+    if np.all(on):
+        return vals[j]
+    out = np.empty((len(seconds), vals.shape[1]))
+    out[on] = vals[j[on]]
+    x = seconds[~on]
+    i = np.clip(np.searchsorted(t, x, side="right") - 1, 0, len(t) - 2)
+    t0, t1 = t[i], t[i + 1]
+    dt = np.where(t1 > t0, t1 - t0, 1.0)
+    u = np.clip((x - t0) / dt, 0.0, 1.0)
+    if ch.interpolation == "STEP":
+        res = np.where((u >= 1.0)[:, None], vals[i + 1], vals[i])
+    elif cubic:  # glTF 2.0 spec, Appendix C: Hermite spline with tangents scaled by the key interval
+        u2, u3 = u * u, u * u * u
+        h00, h10 = 2 * u3 - 3 * u2 + 1, u3 - 2 * u2 + u
+        h01, h11 = -2 * u3 + 3 * u2, u3 - u2
+        res = (h00[:, None] * v[i, 1] + (h10 * dt)[:, None] * v[i, 2]
+               + h01[:, None] * v[i + 1, 1] + (h11 * dt)[:, None] * v[i + 1, 0])
+        if ch.path == "r":  # tangents that cancel the value would divide by zero: hold the key there
+            n = np.linalg.norm(res, axis=1, keepdims=True)
+            res = np.where(n > 1e-12, res / np.where(n > 1e-12, n, 1.0), vals[i])
+    elif ch.path == "r":
+        res = slerp(vals[i], vals[i + 1], u)
+    else:
+        res = vals[i] + (vals[i + 1] - vals[i]) * u[:, None]
+    out[~on] = res
+    return out
+
+
+def _off_grid(seconds: np.ndarray, fps: float) -> np.ndarray:
+    f = np.asarray(seconds, dtype=np.float64) * fps
+    return np.abs(f - np.round(f)) > GRID_KEY_FRAMES
+
+
+def choose_fps(key_seconds: list, hint: float | None = None) -> float:
+    """The grid rate for clips whose keys are at ``key_seconds`` (one array per clip).
+
+    The file's declared rate ``hint`` if every key falls on it, else the first of
+    :data:`GRID_RATES` that holds every key, else the one holding the most clips (ties: earlier
+    in the list), else :data:`DEFAULT_FPS`.
+    """
+    clips = [np.asarray(k, dtype=np.float64) for k in key_seconds if len(k) > 1]
+    rates = ((float(hint),) if hint and hint > 0 else ()) + GRID_RATES
+    if not clips:
+        return float(hint) if hint and hint > 0 else 24.0
+    best, best_n = None, 0
+    for r in rates:
+        n = sum(not np.any(_off_grid(k, r)) for k in clips)
+        if n == len(clips):
+            return r
+        if n > best_n:
+            best, best_n = r, n
+    return best if best is not None else DEFAULT_FPS
+
+
+def grid_frames(seconds: np.ndarray, fps: float) -> np.ndarray:
+    """Whole frame numbers from the frame at or before the first key to the one at or after the last."""
+    f = np.asarray(seconds, dtype=np.float64) * fps
+    f0 = int(np.floor(f.min() + GRID_KEY_FRAMES))
+    f1 = int(np.ceil(f.max() - GRID_KEY_FRAMES))
+    return np.arange(f0, max(f0, f1) + 1, dtype=np.float64)
+
+
+def _joint_locals(seconds, chans, nlocal, static_t, static_q, static_s, sub, sub_of, sub_parents, jsub,
+                  jparents, n_ghost, rest, sub_rrs=None, key_tol=0.0, path="", clip="", jnames=()):
+    """(f, b, 4, 4) joint-local transforms at ``seconds``: node locals sampled, composed to world,
+    made relative to each joint's parent joint (ghost joints hold their rest).  Raises
+    :class:`InputError` (naming ``path``, ``clip`` and the joint) where a joint's world transform
+    is degenerate (a scale through zero): joint space is not defined there."""
+    f = len(seconds)
+    loc = np.broadcast_to(nlocal[sub], (f, len(sub), 4, 4)).copy()
+    by_node = {}
+    for c in chans:
+        by_node.setdefault(c.node, {})[c.path] = c
+    if by_node:  # every animated node's TRS sampled, then composed in one call
+        nodes = list(by_node)
+        T = np.empty((f, len(nodes), 3))
+        R = np.empty((f, len(nodes), 4))
+        S = np.empty((f, len(nodes), 3))
+        for x, node in enumerate(nodes):
+            paths = by_node[node]
+            T[:, x] = sample_channel(paths["t"], seconds, key_tol) if "t" in paths else static_t[node]
+            R[:, x] = sample_channel(paths["r"], seconds, key_tol) if "r" in paths else static_q[node]
+            S[:, x] = sample_channel(paths["s"], seconds, key_tol) if "s" in paths else static_s[node]
+        loc[:, [sub_of[n] for n in nodes]] = compose_trs(T, R, S)
+    with np.errstate(all="ignore"):  # an overflow to inf is caught by degenerate()
+        world = _world(loc, sub_parents, sub_rrs)
+    jw_ = world[:, jsub]
+    bad = np.argwhere(degenerate(jw_))
+    if len(bad):
+        f0, j0 = bad[0]
+        raise InputError(path, f"clip {clip!r} at {seconds[f0]:g} s: joint {jnames[j0] if len(jnames) > j0 else j0!r} "
+                         f"has a world transform that {_BAD_XFORM}")
+    b = len(jsub) + n_ghost
+    out = np.empty((f, b, 4, 4))
+    nb = len(jsub)
+    par = np.asarray(jparents[:nb])
+    out[:, :nb] = jw_
+    kids = np.flatnonzero(par >= 0)
+    if len(kids):
+        out[:, kids] = np.linalg.solve(jw_[:, par[kids]], jw_[:, kids])
+    for q in range(len(jsub), b):
+        out[:, q] = rest[q]
+    return out
+
+
+def _interp_locals(frames, rate, jl, seconds):
+    """Joint locals at ``seconds`` as UsdSkel interpolates the grid samples ``jl`` (lerp of
+    translation and scale, slerp of rotation between the two neighbouring frames)."""
+    t, q, s = decompose_trs(jl)
+    x = np.asarray(seconds) * rate
+    i = np.clip(np.searchsorted(frames, x, side="right") - 1, 0, len(frames) - 2) if len(frames) > 1 else np.zeros(len(x), int)
+    if len(frames) == 1:
+        return compose_trs(t[i], q[i], s[i])
+    u = np.clip(x - frames[i], 0.0, 1.0)
+    uu = np.broadcast_to(u[:, None], (len(u), jl.shape[1]))
+    tt = t[i] + (t[i + 1] - t[i]) * uu[..., None]
+    ss = s[i] + (s[i + 1] - s[i]) * uu[..., None]
+    qq = slerp(q[i], q[i + 1], uu)
+    return compose_trs(tt, qq, ss)
+
+
+def _resampling_bound(frames, rate, jl, key_seconds, jl_keys, parents, bind, positions, ji, jw) -> float:
+    """Upper bound, in skeleton units, of how far any vertex is from the source's pose at the
+    source key times that fall between frames.
+
+    Between two frames the asset interpolates each joint's TRS; the source interpolates between
+    its own keys.  Both are smooth between their breakpoints, so the largest gap sits at a source
+    key (for translations and scales, piecewise-linear, it is exactly there).  At each such key,
+    a vertex skinned by joints ``j`` with weights summing to 1 is off by at most
+    ``max_j |D_j p|`` with ``D_j`` the difference of the two skinning matrices; over the joint's
+    vertices that is at most ``||D_j[:3, :3]||_2 * r_j + |D_j c_j|`` for a sphere ``(c_j, r_j)``
+    around them.
+    """
+    asset = skel_transforms(_interp_locals(frames, rate, jl, key_seconds), parents)
+    src = skel_transforms(jl_keys, parents)
+    inv_bind = np.linalg.inv(bind)
+    d = (asset - src) @ inv_bind  # (f, b, 4, 4)
+    p = positions.astype(np.float64)
+    bound = 0.0
+    for j in range(len(bind)):
+        rows = np.flatnonzero(np.any((ji == j) & (jw > 0), axis=1))
+        if not len(rows):
+            continue
+        pts = p[rows]
+        c = 0.5 * (pts.min(0) + pts.max(0))
+        r = float(np.linalg.norm(pts - c, axis=1).max())
+        dj = d[:, j]
+        lin = np.linalg.norm(dj[:, :3, :3], ord=2, axis=(1, 2))
+        off = np.linalg.norm(dj[:, :3, :3] @ c + dj[:, :3, 3], axis=1)
+        bound = max(bound, float(np.max(lin * r + off)))
+    return bound
