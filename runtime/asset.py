@@ -242,6 +242,12 @@ def _static_local_to_world(prim):
 def read_collider(path) -> ColliderData:
     """Read one asset into :class:`ColliderData`; :class:`ColliderError` with one line if it
     cannot be read or does not follow the layout."""
+    return read_collider_stage(path)[0]
+
+
+def read_collider_stage(path):
+    """:func:`read_collider`, and the ``Usd.Stage`` it read (so a verifier can check the same
+    stage instead of reading the file again)."""
     try:
         return _read(path)
     except ColliderError as e:
@@ -251,7 +257,8 @@ def read_collider(path) -> ColliderData:
         raise ColliderError(f"{path}: cannot read asset: {msg[:300]}") from None
 
 
-def _read(path) -> ColliderData:
+def _read(path):
+    """``(ColliderData, stage)``."""
     from pxr import Sdf, Usd, UsdGeom, UsdSkel
 
     path = os.fspath(path)
@@ -296,10 +303,17 @@ def _read(path) -> ColliderData:
     if len(bind) != J or len(rest) != J:
         raise ColliderError(f"{skel_prim.GetPath()}: {J} joints but {len(bind)} bindTransforms and "
                             f"{len(rest)} restTransforms")
+    for name, m in (("bindTransforms", bind), ("restTransforms", rest)):
+        bad = np.flatnonzero(~np.isfinite(m).all(axis=(1, 2)))
+        if len(bad):
+            raise ColliderError(f"{skel_prim.GetPath()}.{name}: joint {joints[bad[0]]!r} is not finite")
     try:
-        inv_bind = np.linalg.inv(bind)
+        with np.errstate(all="ignore"):
+            inv_bind = np.linalg.inv(bind)
     except np.linalg.LinAlgError:
         raise ColliderError(f"{skel_prim.GetPath()}: a bind transform is singular") from None
+    if not np.isfinite(inv_bind).all():
+        raise ColliderError(f"{skel_prim.GetPath()}: a bind transform is singular")
 
     # -- mesh
     counts = np.asarray(_get(mesh, "faceVertexCounts"), dtype=np.int64)
@@ -355,6 +369,8 @@ def _read(path) -> ColliderData:
     gb_attr = binding.GetGeomBindTransformAttr()
     gb = gb_attr.Get() if gb_attr and gb_attr.HasAuthoredValue() else None
     geom_bind = schema.matrices_from_usd(gb) if gb is not None else np.eye(4)
+    if not np.isfinite(geom_bind).all():
+        raise ColliderError(f"{mesh.GetPath()}: primvars:skel:geomBindTransform is not finite")
     blend = blend_shapes(mesh)
     if blend:
         raise ColliderError(f"{mesh.GetPath()} has UsdSkel blend shapes ({blend}); colossus skins without them, so "
@@ -378,6 +394,13 @@ def _read(path) -> ColliderData:
     if len(centers) != P or len(radii) != P or len(offs) != P + 1:
         raise ColliderError(f"{where}*: {P} joints but {len(centers)} centers, {len(radii)} radii, "
                             f"{len(offs)} faceOffsets (want {P + 1})")
+    bad = np.flatnonzero(~(np.isfinite(radii) & (radii >= 0)))
+    if len(bad):
+        raise ColliderError(f"{where}radii: part {int(bad[0])} radius is {float(radii[bad[0]])!r} (a radius is a finite "
+                            "number >= 0)")
+    bad = np.flatnonzero(~np.isfinite(centers).all(axis=1))
+    if len(bad):
+        raise ColliderError(f"{where}centers: part {int(bad[0])} centre is not finite")
     if offs[0] != 0 or (np.diff(offs) < 0).any() or offs[-1] != len(faces):
         raise ColliderError(f"{where}faceOffsets is not a CSR offset array into {len(faces)} faces")
     F = len(tris)
@@ -413,7 +436,7 @@ def _read(path) -> ColliderData:
         chunk_vert_offsets=chunk_vert_offsets, chunk_verts=chunk_verts, faces_shared=bool(len(faces) > F),
         bounds=bounds, clips=clips, static_local_to_world=l2w,
         stage=stage if l2w is None else None,
-    )
+    ), stage
 
 
 #: The clip record's former name (one record now: :class:`runtime.schema.Clip`).

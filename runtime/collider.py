@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from .asset import ClipData, ColliderData, read_collider
+from .asset import ClipData, ColliderData, read_collider, read_collider_stage
 from .backends import get_backend
 from .kernels import bounds as B
 from .kernels import pose as PK
@@ -65,6 +65,11 @@ def _vec3s(a, name):
     if not np.isfinite(a).all():
         raise ValueError(f"{name} must be finite")
     return np.ascontiguousarray(a)
+
+
+#: Largest entry a posed joint's composed transform may have: beyond it products in float64 lose
+#: every bit the sphere bounds rely on (and 1e154 squared overflows).
+LARGEST_TRANSFORM = 1e12
 
 
 class Pose:
@@ -156,6 +161,10 @@ class Pose:
         self._set_world(float(time))
         self._local[:] = local
         self._posed()
+        st = self.skinning_transforms
+        if not (np.isfinite(st).all() and np.abs(st).max(initial=0.0) <= LARGEST_TRANSFORM):
+            raise ValueError("pose_from_joints: the joints' composed transforms overflow (an entry is "
+                             f"not finite or beyond {LARGEST_TRANSFORM:g}); no pose, no spheres for them")
         self._refit()
         self.clip = None
         self.time = float(time)
@@ -239,10 +248,13 @@ class Pose:
         dirs = _vec3s(directions, "directions")
         if o.shape != dirs.shape:
             raise ValueError(f"origins {o.shape} and directions {dirs.shape} differ in shape")
-        n = np.linalg.norm(dirs, axis=1)
-        if (n == 0).any():
+        # scaled by its largest component first: a finite but huge direction (1e200) would overflow
+        # its norm to inf and become a zero direction, a silent miss
+        big = np.abs(dirs).max(axis=1) if len(dirs) else np.zeros(0)
+        if (big == 0).any():
             raise ValueError("a direction is zero")
-        dirs = dirs / n[:, None]
+        dirs = dirs / big[:, None]
+        dirs = dirs / np.linalg.norm(dirs, axis=1)[:, None]
         md = float(max_distance)
         if not md >= 0:
             raise ValueError(f"max_distance must be >= 0, got {max_distance}")
@@ -497,12 +509,14 @@ def load_collider(path, verify=None, backend="parts") -> Collider:
         line) when the asset is not fit for use; the validators' error-severity rules are
         ``validators.require_passing``.  The runtime never imports the validators itself
         (layers: runtime is the lowest), so game code that wants verification passes it here.
+        A verifier with ``accepts_stage = True`` (``require_passing`` has it) is handed the
+        ``Usd.Stage`` just read instead of the path: the file is read once.
     backend : {"parts", "brute", "trimesh"} or a backend object
 
     Raises :class:`ColliderError` (one-line message) on a missing, unreadable or invalid asset."""
     if verify is not None and verify is not False and not callable(verify):
         raise TypeError("verify must be a callable such as validators.require_passing, or None")
-    data = read_collider(path)
+    data, stage = read_collider_stage(path)
     if verify:
-        verify(path)
+        verify(stage if getattr(verify, "accepts_stage", False) else path)
     return Collider(data, backend=backend)

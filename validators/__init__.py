@@ -27,7 +27,9 @@ def require_passing(path):
     return _require(path)
 
 
-require_passing.__doc__ = """Raise ``runtime.ColliderError`` when ``path`` has an error finding (see
-:func:`validators.runner.require_passing`); the verifier for ``runtime.load_collider(path, verify=...)``."""
+require_passing.__doc__ = """Raise ``runtime.ColliderError`` when ``path`` (or a ``Usd.Stage``) has an error
+finding (see :func:`validators.runner.require_passing`); the verifier for
+``runtime.load_collider(path, verify=...)``, which hands it the stage it read (the file is read once)."""
+require_passing.accepts_stage = True
 
 __all__ = ["check_asset", "require_passing", "AssetReport", "Finding", "RuleSelector", "all_rules", "get_rule"]

@@ -217,7 +217,8 @@ def external_references(path) -> list:
 
 
 def require_passing(path) -> AssetReport:
-    """Run every rule on ``path`` and raise :class:`runtime.ColliderError` (one line listing the
+    """Run every rule on ``path`` (a path, or a ``Usd.Stage`` already read: ``load_collider``
+    hands over the stage it read) and raise :class:`runtime.ColliderError` (one line listing the
     first error findings) when any has severity error; the verifier game code hands to
     ``runtime.load_collider(path, verify=require_passing)``.  Returns the report otherwise."""
     from colossus.runtime.errors import ColliderError
@@ -227,8 +228,11 @@ def require_passing(path) -> AssetReport:
     if errs:
         listing = "; ".join(f"{f.code} {f.message}" for f in errs[:5])
         more = f" (+{len(errs) - 5} more)" if len(errs) > 5 else ""
-        raise ColliderError(one_line(f"{path}: fails verification: {listing}{more}", limit=1000))
+        raise ColliderError(one_line(f"{report.path}: fails verification: {listing}{more}", limit=1000))
     return report
+
+
+require_passing.accepts_stage = True
 
 
 def _stats(asset, ctx, t_load, t_total) -> dict:

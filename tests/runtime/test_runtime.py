@@ -51,6 +51,25 @@ def test_load_verified(limb_path):
         load_collider(limb_path, verify=True)  # the runtime never imports the validators itself
 
 
+def test_load_verified_reads_the_file_once(limb_path, monkeypatch):
+    """The verifier checks the stage load_collider read: the validators never open the file
+    again (their opener is made to fail), and a plain path verifier still gets the path."""
+    from colossus.validators import asset as vasset
+    from colossus.validators import require_passing
+
+    def no_second_read(path):
+        raise AssertionError(f"the validators opened {path} again")
+
+    monkeypatch.setattr(vasset, "open_stage", no_second_read)
+    from colossus.validators import runner
+    monkeypatch.setattr(runner, "open_stage", no_second_read)
+    col = load_collider(limb_path, verify=require_passing)
+    assert col.clips == ["bend"]
+    seen = []
+    load_collider(limb_path, verify=seen.append)
+    assert seen == [limb_path]
+
+
 @pytest.mark.parametrize("content", [None, b"", b"#usda 1.0\n(\n garbage", b"\x00\x01binary junk" * 10,
                                      b"#usda 1.0\ndef Xform \"x\" {}\n"])
 def test_bad_files(tmp_path, content):
@@ -658,3 +677,44 @@ def test_a_radius_shrunk_by_a_thousandth_fails_and_usd_agrees(name, imported, tm
 def pose_world(col, t):
     d = col.data
     return d.static_local_to_world if d.static_local_to_world is not None else np.eye(4)
+
+
+# ---- the runtime refuses what it cannot honour (issue 27 item 5) ------------------------------
+def test_huge_finite_direction_is_normalised_not_a_silent_miss(limb):
+    import warnings
+    pose = limb.pose("bend", limb.frame_times("bend")[0])
+    lo, hi = pose.points.min(0), pose.points.max(0)
+    o = np.array([(lo + hi) / 2 + [0.0, 0.0, 10.0 * float(np.linalg.norm(hi - lo))]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no RuntimeWarning either
+        unit = pose.raycast(o, np.array([[0.0, 0.0, -1.0]]))
+        huge = pose.raycast(o, np.array([[0.0, 0.0, -1e200]]))
+        tiny = pose.raycast(o, np.array([[0.0, 0.0, -1e-300]]))
+    assert np.isfinite(unit.distance[0])
+    np.testing.assert_array_equal(huge.distance, unit.distance)
+    np.testing.assert_array_equal(tiny.triangle, unit.triangle)
+
+
+def test_pose_from_joints_refuses_overflowing_transforms(limb):
+    J = len(limb.data.joints)
+    local = np.repeat(np.eye(4)[None], J, 0)
+    local[:, :3, :3] *= 1e200  # finite, but the chain's product overflows
+    with pytest.raises(ValueError, match="overflow"):
+        limb.pose_from_joints(local)
+    assert np.isfinite(limb.pose_from_joints(np.repeat(np.eye(4)[None], J, 0)).spheres).all()
+
+
+@pytest.mark.parametrize("value, what", [(float("nan"), "radii: part 0 radius is nan"),
+                                         (-1.0, "radii: part 0 radius is -1.0")])
+def test_load_refuses_bad_stored_radii(limb_path, tmp_path, value, what):
+    from references.usd_fixture import open_copy
+    s = open_copy(limb_path)
+    mesh = next(p for p in s.Traverse() if p.GetTypeName() == "Mesh")
+    a = mesh.GetAttribute("colossus:parts:radii")
+    radii = list(a.Get())
+    radii[0] = value
+    a.Set(radii)
+    out = tmp_path / "bad.usda"
+    s.GetRootLayer().Export(str(out))
+    with pytest.raises(ColliderError, match=what):
+        load_collider(out)
