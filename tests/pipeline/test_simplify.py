@@ -18,7 +18,7 @@ import pytest
 from click.testing import CliRunner
 
 from references import naive
-from references import synth
+import synth
 from colossus.cli import main
 from colossus.pipeline.errors import UsageError
 from colossus.pipeline.geometry.collapse import apply_collapses, interior_vertices

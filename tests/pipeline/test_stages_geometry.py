@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from references import naive
-from references import synth
+import synth
 from colossus.pipeline.geometry import min_sphere, min_spheres
 from colossus.pipeline.stages.orient import orient
 from colossus.pipeline.stages.parts import parts
