@@ -97,7 +97,14 @@ def read_scene(path, budget, fbx) -> Scene:
     try:
         scene = assimp_py.import_file(path, assimp_flags())
     except Exception as exc:  # assimp reports every parse failure as a generic exception
-        msg = " ".join(str(exc).split()) or type(exc).__name__
+        msg = " ".join(str(exc).split())
+        # assimp's message starts "Assimp error loading '<path>':" and is sometimes nothing more
+        # (an FBX whose compressed arrays do not inflate): the reason is ours then
+        head = msg.split(":", 1)
+        if msg.startswith("Assimp error loading") and len(head) == 2 and "'" in head[0]:
+            msg = msg[msg.index("':") + 2:].strip() if "':" in msg else head[1].strip()
+        msg = msg or ("assimp gave no reason (corrupt, compressed data it cannot inflate, or a variant of the "
+                      "format it does not read)")
         raise InputError(path, f"not a readable {ext.lstrip('.').upper() or 'model'} file: {msg}") from None
     if scene is None or scene.root_node is None:
         raise InputError(path, "assimp returned no scene (empty or unsupported file)")

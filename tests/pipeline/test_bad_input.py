@@ -728,3 +728,26 @@ def test_validate_overflowing_joints_no_warning(validate_json):
     codes = {f["code"] for f in r["findings"]}
     assert "COL002" not in codes and "COL503" in codes, codes
     assert "composed down the hierarchy" in next(f["message"] for f in r["findings"] if f["code"] == "COL503")
+
+
+@pytest.mark.parametrize("kind", ["bomb", "claims"])
+def test_fbx_zlib_bomb_refusal_has_a_reason(work, run_import, kind):
+    """An FBX whose compressed vertex array inflates to 480 MB (a zlib bomb), or claims 2**30
+    values: assimp refuses it with an empty message ("Assimp error loading 'x.fbx':"); the line
+    says why (issue 27 item 4)."""
+    import zlib
+
+    from fuzz.mutators import _fbx_all, fbx_parse, fbx_write
+    version, top, footer = fbx_parse((SAMPLES / "limb.fbx").read_bytes())
+    for n, _, _ in _fbx_all(top):
+        if n.name == b"Vertices":
+            t, raw = n.props[0]
+            length = struct.unpack_from("<I", raw, 1)[0]
+            body = zlib.compress(np.zeros(60_000_000 if kind == "bomb" else 10, "<f8").tobytes(), 9)
+            n.props[0] = (t, t.encode() + struct.pack("<III", length if kind == "bomb" else 1 << 30, 1, len(body)) + body)
+    src = work / "bomb.fbx"
+    src.write_bytes(fbx_write(version, top, footer))
+    out = work / "o.usda"
+    r = run_import(src, out)
+    assert_clean_failure(r, out, "bomb.fbx: not a readable FBX file: ")
+    assert not r.stderr.rstrip().endswith(":"), r.stderr
