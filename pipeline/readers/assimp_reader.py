@@ -98,6 +98,8 @@ def read_scene(path, budget, fbx) -> Scene:
         scene = assimp_py.import_file(path, assimp_flags())
     except Exception as exc:  # assimp reports every parse failure as a generic exception
         msg = " ".join(str(exc).split())
+        if "bad_alloc" in msg:  # the contained reader's memory cap: the standard line (isolation)
+            raise MemoryError(msg) from None
         # assimp's message starts "Assimp error loading '<path>':" and is sometimes nothing more
         # (an FBX whose compressed arrays do not inflate): the reason is ours then
         head = msg.split(":", 1)

@@ -751,3 +751,22 @@ def test_fbx_zlib_bomb_refusal_has_a_reason(work, run_import, kind):
     r = run_import(src, out)
     assert_clean_failure(r, out, "bomb.fbx: not a readable FBX file: ")
     assert not r.stderr.rstrip().endswith(":"), r.stderr
+
+
+def test_fbx_count_bomb_hits_the_memory_cap(work, run_import):
+    """An FBX index array that claims 4 G entries: assimp allocates for the claim inside the
+    contained reader, whose memory is capped for the file's size; the refusal is the readers'
+    usual memory line, at once (issue 26 item 5)."""
+    from fuzz.mutators import _fbx_all, fbx_parse, fbx_write
+    version, top, footer = fbx_parse((SAMPLES / "limb.fbx").read_bytes())
+    for n, _, _ in _fbx_all(top):
+        if n.name == b"PolygonVertexIndex":
+            t, raw = n.props[0]
+            _, enc, clen = struct.unpack_from("<III", raw, 1)
+            n.props[0] = (t, t.encode() + struct.pack("<III", 0xFFFFFFF0, enc, clen) + raw[13:])
+    src = work / "count.fbx"
+    src.write_bytes(fbx_write(version, top, footer))
+    out = work / "o.usda"
+    t0 = time.monotonic()
+    assert_clean_failure(run_import(src, out), out, "needs more memory than")
+    assert time.monotonic() - t0 < 10
