@@ -158,10 +158,16 @@ def read_clip(prim, joint_index) -> Clip:
     times = np.union1d(np.union1d(tt, tr), ts) if any(
         a.HasAuthoredValue() and a.GetNumTimeSamples() for a in
         (anim.GetTranslationsAttr(), anim.GetRotationsAttr(), anim.GetScalesAttr())) else np.zeros(0)
+    aliases = []
+    for value in (prim.GetCustomDataByKey(schema.CLIP_NAME_KEY),
+                  (prim.GetCustomDataByKey(schema.CLIP_SOURCE_KEY) or {}).get("sourceName")):
+        if isinstance(value, str) and value and value != prim.GetName() and value not in aliases:
+            aliases.append(value)
     return Clip(
         name=prim.GetName(), path=where,
         tt=tt, vt=np.ascontiguousarray(vt[:, keep]), tr=tr, vr=np.ascontiguousarray(vr[:, keep]),
-        ts=ts, vs=np.ascontiguousarray(vs[:, keep]), anim_to_skel=amap[keep], times=times)
+        ts=ts, vs=np.ascontiguousarray(vs[:, keep]), anim_to_skel=amap[keep], times=times,
+        source_names=tuple(aliases))
 
 
 #: Faces per chunk: the second culling level under the part spheres.

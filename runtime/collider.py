@@ -380,6 +380,14 @@ class Collider:
         self.lazy = lazy
         self.backend = get_backend(backend)
         self._clips = {c.name: c for c in data.clips}
+        # a clip's source names (``Take 001`` for the prim ``Take_001``) reach it too, where no
+        # other clip has that name or alias
+        alias = {}
+        for c in data.clips:
+            for a in getattr(c, "source_names", ()):
+                if a not in self._clips:
+                    alias.setdefault(a, []).append(c)
+        self._aliases = {a: cs[0] for a, cs in alias.items() if len(cs) == 1}
         A0 = np.zeros((1, 0, 3))
         self._rest = ClipData("", "", np.zeros(1), A0, np.zeros(1), np.zeros((1, 0, 4)),
                               np.zeros(1), A0, np.zeros(0, dtype=np.int64), np.zeros(0))
@@ -479,10 +487,39 @@ class Collider:
     def _clip(self, clip):
         if clip is None:
             return self._rest
-        try:
-            return self._clips[clip]
-        except KeyError:
-            raise KeyError(f"no clip {clip!r}; clips are {self.clips}") from None
+        found = self._clips.get(clip) or self._aliases.get(clip)
+        if found is None:
+            raise KeyError(f"no clip {clip!r}; clips are {self.clips}")
+        return found
+
+    @property
+    def fps(self) -> float:
+        """Time codes per second of the asset (its clips' frame rate)."""
+        return float(self.data.time_codes_per_second)
+
+    def duration(self, clip: str) -> float:
+        """Seconds from the clip's first frame to its last."""
+        t = self._clip(clip).times
+        return float(t[-1] - t[0]) / self.fps if len(t) else 0.0
+
+    def time_code(self, clip: str, seconds: float, loop: bool = True) -> float:
+        """The clip's time code ``seconds`` after its first frame; ``loop`` wraps it into the clip
+        (a game's looping animation), else it is held at the ends."""
+        t = self._clip(clip).times
+        if not len(t):
+            return 0.0
+        s = float(seconds)
+        if not np.isfinite(s):
+            raise ValueError(f"seconds must be finite, got {seconds!r}")
+        span = float(t[-1] - t[0])
+        code = s * self.fps
+        if loop and span > 0:
+            code = code % span
+        return float(t[0]) + min(max(code, 0.0), span)
+
+    def pose_at_seconds(self, clip: str, seconds: float, loop: bool = True, out: Pose | None = None) -> Pose:
+        """:meth:`pose` at ``seconds`` into the clip (:meth:`time_code`)."""
+        return self.pose(clip, self.time_code(clip, seconds, loop), out=out)
 
     def pose(self, clip: str | None, time: float = 0.0, out: Pose | None = None) -> Pose:
         """The collider at ``clip`` (None: the rest pose) and time code ``time`` (any value:

@@ -231,6 +231,9 @@ class Clip:
     vs: np.ndarray
     anim_to_skel: np.ndarray
     times: np.ndarray
+    #: the names the clip had in its source where the asset's differs (a prim name is a USD
+    #: identifier: ``Take 001`` becomes ``Take_001``), from the animation's customData
+    source_names: tuple = ()
 
     @classmethod
     def on_grid(cls, name: str, times, t, q, s, path: str | None = None) -> "Clip":

@@ -718,3 +718,30 @@ def test_load_refuses_bad_stored_radii(limb_path, tmp_path, value, what):
     s.GetRootLayer().Export(str(out))
     with pytest.raises(ColliderError, match=what):
         load_collider(out)
+
+
+# ---- names and seconds (issue 24 item 4) ------------------------------------------------------
+def test_clip_source_names_seconds_and_looping(limb_path, tmp_path):
+    """A clip is reached by its asset name or by the name it had in its source (the writer keeps
+    it in the SkelAnimation's customData when the prim name differs); times in seconds, looped."""
+    from colossus.runtime import schema
+    from references.usd_fixture import open_copy
+    s = open_copy(limb_path)
+    anim = next(p for p in s.Traverse() if p.GetTypeName() == "SkelAnimation")
+    anim.SetCustomDataByKey(schema.CLIP_NAME_KEY, "Bend Fast")
+    out = tmp_path / "named.usda"
+    s.GetRootLayer().Export(str(out))
+    col = load_collider(out)
+    assert col.clips == ["bend"] and col.fps == 24.0
+    t = col.frame_times("bend")
+    a, b = col.pose("bend", t[3]), col.pose("Bend Fast", t[3])
+    assert b.clip == "bend"
+    np.testing.assert_array_equal(a.points, b.points)
+    span = (t[-1] - t[0]) / col.fps
+    assert col.duration("Bend Fast") == pytest.approx(span)
+    np.testing.assert_array_equal(col.pose_at_seconds("bend", 3 / col.fps).points, a.points)
+    np.testing.assert_array_equal(col.pose_at_seconds("bend", span + 3 / col.fps).points, a.points)   # looped
+    end = col.pose_at_seconds("bend", 10 * span, loop=False)
+    np.testing.assert_array_equal(end.points, col.pose("bend", t[-1]).points)                      # held
+    with pytest.raises(KeyError, match="no clip 'Take 001'"):
+        col.pose("Take 001", 0.0)
