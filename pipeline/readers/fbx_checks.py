@@ -304,25 +304,27 @@ def _skinning_type(ctx) -> list:
 
 
 def _scale_values(ctx, oid) -> list:
-    """Every scale a model has: at rest, and at each key of its scaling curves."""
+    """Every scale a model has: at rest, and at each key time of its scaling curves (the three
+    components together, each curve interpolated linearly at the others' key times)."""
     g = ctx.g
     p = g.props(oid)
-    vals = [_vec(p.get("Lcl Scaling", 1), [1, 1, 1])]
-    for node, comps in _curve_nodes(g, oid, "Lcl Scaling").items():
-        ks = [c for c in comps.values() if c is not None]
-        if not ks:
-            continue
-        base = vals[0].copy()
+    rest = _vec(p.get("Lcl Scaling", 1), [1, 1, 1])
+    vals = [rest]
+    for comps in _curve_nodes(g, oid, "Lcl Scaling").values():
+        curves = {}
         for axis, curve in comps.items():
-            if curve is None:
-                continue
-            kv = g.objects[curve].value("KeyValueFloat")
-            if kv is None:
-                continue
-            for v in np.asarray(kv, dtype=np.float64):
-                x = base.copy()
-                x["XYZ".index(axis)] = v
-                vals.append(x)
+            n = g.objects.get(curve) if curve is not None else None
+            kt = n.value("KeyTime") if n is not None else None
+            kv = n.value("KeyValueFloat") if n is not None else None
+            if kt is not None and kv is not None and len(kt) == len(kv) and len(kt):
+                curves[axis] = (np.asarray(kt, dtype=np.float64), np.asarray(kv, dtype=np.float64))
+        if not curves:
+            continue
+        times = np.unique(np.concatenate([t for t, _ in curves.values()]))
+        s3 = np.tile(rest, (len(times), 1))
+        for axis, (t, v) in curves.items():
+            s3[:, "XYZ".index(axis)] = np.interp(times, t, v)
+        vals.extend(s3)
     return vals
 
 

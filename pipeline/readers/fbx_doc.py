@@ -42,10 +42,10 @@ class Node:
     def value(self, name, default=None):
         """The first property of child ``name`` (an array child's decoded array)."""
         c = self.child(name)
+        if c is not None and c.name in ARRAYS and c.child("a") is not None:  # ASCII arrays: *N { a: ... }
+            return c.child("a").array()
         if c is None or not c.props:
             return default
-        if c.name in ARRAYS and c.child("a") is not None:  # ASCII arrays: *N { a: ... }
-            return c.child("a").array()
         return c.props[0]
 
     def array(self):
