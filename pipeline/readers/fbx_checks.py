@@ -436,10 +436,9 @@ def _transform_skin(ctx) -> list:
         while scene.parents[top] >= 0:
             top = int(scene.parents[top])
         root = scene.local[top] if top != node and scene.names[top] == "RootNode" else np.eye(4)
-        which, pts, size = ctx.posed()
-        rows = ctx.rows_of({name} | {sm.name for sm in scene.meshes if sm.node == node})
-        worst, at = 0.0, ""
-        for k, (ci, fi) in enumerate(which):
+        which = bounds.frames(mesh)
+        ds = []
+        for ci, fi in which:
             if ci < 0:
                 anim, sec = None, np.zeros(1)
             else:
@@ -448,7 +447,16 @@ def _transform_skin(ctx) -> list:
                 anim = next((a for a in scene.animations if a.name == src), None)
                 sec = np.array([clip.times[fi] / mesh.time_codes_per_second])
             w = _node_world(scene, node, anim, sec)[0]
-            d = root @ (np.linalg.solve(root, w) @ geo_inv @ b_inv) @ np.linalg.inv(root) - np.eye(4)
+            ds.append(root @ (np.linalg.solve(root, w) @ geo_inv @ b_inv) @ np.linalg.inv(root) - np.eye(4))
+        ds = np.array(ds)
+        reach = float(np.abs(mesh.positions).max()) + 1.0
+        if np.abs(ds[:, :3, :3]).max() * reach + np.abs(ds[:, :3, 3]).max() <= 1e-9 * reach:
+            continue  # the node is where it was bound, at every frame: nothing to pose
+        which, pts, size = ctx.posed()
+        rows = ctx.rows_of({name} | {sm.name for sm in scene.meshes if sm.node == node})
+        worst, at = 0.0, ""
+        for k, (ci, fi) in enumerate(which):
+            d = ds[k]
             e = float(np.linalg.norm(pts[k][rows] @ d[:3, :3].T + d[:3, 3], axis=1).max())
             if e > worst:
                 worst, at = e, ("rest" if ci < 0 else f"clip {mesh.clips[ci].name!r} frame {mesh.clips[ci].times[fi]:g}")
