@@ -106,7 +106,7 @@ def import_many(sources, out_dir, settings, jobs=1, scheduler=None, progress=Fal
         def lost(e):
             rows[src] = {"source": src, "output": out, "ok": False, "error": f"import crashed: {e}"}
             bar.advance(True)
-        return Task(_import_unit, (src, out, settings, strict), ok, err, lost)
+        return Task(_import_unit, (src, out, settings) + ((True,) if strict else ()), ok, err, lost)
 
     outs = [os.path.join(out_dir, n) for n in names]
     work = list(zip(uniq, outs))
