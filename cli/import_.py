@@ -178,6 +178,9 @@ def _source_lines(read_rep, mesh=None) -> list:
 @click.option("--allow-outside-references", is_flag=True,
               help="Let the source reference files outside its own folder (absolute paths, '..'); "
                    "refused by default. Only regular files are ever read.")
+@click.option("--strict", is_flag=True,
+              help="Refuse (exit 1, nothing written) when the source holds anything the import does not "
+                   "carry exactly (each is a 'not carried' warning otherwise).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--progress/--no-progress", default=None,
               help="Show a progress bar on stderr (default: for large inputs on a terminal).")
@@ -188,12 +191,13 @@ def _source_lines(read_rep, mesh=None) -> list:
 @maps_errors(input_status=1)
 def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, parts_mode, parts_threshold,
                min_part_faces, meshes, fps, source_up_axis, source_meters_per_unit, target_faces, max_deviation,
-               allow_outside_references, as_json, progress, jobs, scheduler):
+               allow_outside_references, strict, as_json, progress, jobs, scheduler):
     """Import the Blender export SRC and write the collider asset OUT.
 
     \b
     Stages: read, bake, weld, orient, bind, [simplify], parts, spheres, write.
-    Exit status: 0 written; 1 the input is unusable (nothing written); 2 usage.
+    Exit status: 0 written; 1 the input is unusable, or with --strict holds something
+    not carried exactly (nothing written); 2 usage.
 
     \b
     Several inputs (SRC..., directories, globs): -o is a directory and each input becomes
@@ -219,7 +223,7 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
     from colossus.pipeline.stages.write import OUTPUT_EXTENSIONS
     one_file_out = out.lower().endswith(OUTPUT_EXTENSIONS) and not os.path.isdir(out)
     if len(srcs) > 1 or ((os.path.isdir(srcs[0]) or is_glob(srcs[0])) and not one_file_out):
-        return _import_many(srcs, out, settings, as_json, progress, jobs, scheduler)
+        return _import_many(srcs, out, settings, as_json, progress, jobs, scheduler, strict)
     src = srcs[0]
     if progress is None:
         try:
@@ -238,7 +242,7 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
         line = f"importing [{'#' * done}{'-' * (24 - done)}] {i}/{n} {name}"
         click.echo(("\r" + line.ljust(60)) if tty else line, err=True, nl=not tty)
 
-    result = import_asset(src, out, settings, progress=on_stage)
+    result = import_asset(src, out, settings, progress=on_stage, strict=strict)
     n = len(settings.stages())
     on_stage(n, n, "done")
     if progress and tty:
@@ -249,7 +253,7 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
         click.echo(format_summary(result))
 
 
-def _import_many(srcs, out, settings, as_json, progress, jobs, scheduler):
+def _import_many(srcs, out, settings, as_json, progress, jobs, scheduler, strict=False):
     """``colossus import A B ... -o DIR``: see :mod:`pipeline.batch`."""
     from colossus.pipeline.batch import format_import_rows, import_many
     from colossus.pipeline.stages.write import OUTPUT_EXTENSIONS
@@ -259,7 +263,8 @@ def _import_many(srcs, out, settings, as_json, progress, jobs, scheduler):
     settings.check()
     show = sys.stderr.isatty() if progress is None else progress
     try:
-        rows, interrupted = import_many(srcs, out, settings, jobs=jobs, scheduler=scheduler, progress=show)
+        rows, interrupted = import_many(srcs, out, settings, jobs=jobs, scheduler=scheduler, progress=show,
+                                        strict=strict)
     except OSError as exc:
         raise OutputError(f"-o {out}: {exc.strerror or exc}") from None
     if as_json:

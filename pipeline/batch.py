@@ -56,7 +56,7 @@ def output_names(sources, ext: str = ".usda") -> list:
             raise ValueError(f"cannot give distinct output names to {sorted(set(names))}")
 
 
-def _import_unit(src, out, settings):
+def _import_unit(src, out, settings, strict=False):
     """Worker side of one batch import: never raises for a bad input."""
     from colossus.runtime import usdlog
 
@@ -65,7 +65,7 @@ def _import_unit(src, out, settings):
     usdlog.silence()
     usdlog.take()
     try:
-        res = import_asset(src, out, settings)
+        res = import_asset(src, out, settings, strict=strict)
     except ColossusError as e:
         return {"source": src, "output": out, "ok": False, "error": one_line(e)}
     except MemoryError:
@@ -75,8 +75,9 @@ def _import_unit(src, out, settings):
                 "error": f"internal error ({type(e).__name__}: {one_line(e)})"}
     return {"source": src, "output": out, "ok": True, "summary": res.summary()}
 
-def import_many(sources, out_dir, settings, jobs=1, scheduler=None, progress=False):
-    """Import every file of ``sources`` (see :func:`expand_inputs`) into ``out_dir``.
+def import_many(sources, out_dir, settings, jobs=1, scheduler=None, progress=False, strict=False):
+    """Import every file of ``sources`` (see :func:`expand_inputs`) into ``out_dir``
+    (``strict``: refuse each input whose reader met anything not carried exactly).
 
     Returns ``(rows, interrupted)``: one dict per input in input order (``source``,
     ``output``, ``ok``, and ``summary`` or ``error``); inputs not imported because of Ctrl-C
@@ -109,7 +110,7 @@ def import_many(sources, out_dir, settings, jobs=1, scheduler=None, progress=Fal
         def lost(e):
             rows[src] = {"source": src, "output": out, "ok": False, "error": f"import crashed: {e}"}
             bar.advance(True)
-        return Task(_import_unit, (src, out, settings), ok, err, lost)
+        return Task(_import_unit, (src, out, settings) + ((True,) if strict else ()), ok, err, lost)
 
     outs = [os.path.join(out_dir, n) for n in names]
     work = list(zip(uniq, outs))

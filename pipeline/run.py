@@ -13,6 +13,7 @@ import numpy as np
 
 from . import __version__
 from .errors import InputError, UsageError
+from . import notcarried
 from .model import SkinnedMesh
 from .isolation import read_isolated
 from .options import parse_max_deviation
@@ -107,6 +108,7 @@ class ImportResult:
             "seconds": round(self.seconds, 4),
             "stage_seconds": {rep.stage: round(rep.seconds, 4) for rep in self.reports},
             "warnings": [w for rep in self.reports for w in rep.warnings],
+            "not_carried": list(m.source.get(notcarried.SOURCE_KEY) or []),
             "stages": {rep.stage: {"counts": rep.counts, **({"details": rep.details} if rep.details else {})}
                        for rep in self.reports},
         }
@@ -190,14 +192,25 @@ def check_read(mesh: SkinnedMesh, src) -> None:
                                   "transform that is not finite, not invertible (zero scale?) or huge")
 
 
-def read_warnings(m: SkinnedMesh) -> list:
-    """The reader's findings worth a warning line: its notes, morph targets not carried, clips
-    whose resampling off the source's keys errs more than the tolerance, no clip at all."""
-    out = list(m.source.get("notes", []))
+def not_carried(m: SkinnedMesh) -> list:
+    """What the reader met and does not carry exactly (:mod:`pipeline.notcarried` records): the
+    reader's own list, and the morph targets / shape keys of the chosen meshes."""
+    out = list(m.source.get(notcarried.SOURCE_KEY) or [])
     morph = m.source.get("morph_meshes") or {}
-    if morph:
-        out.append(f"morph targets / shape keys are not carried into the collider (it follows the skeleton only): "
-                   + ", ".join(f"{k} ({v})" for k, v in morph.items()))
+    if morph and not any(x["what"] == "morph_targets" for x in out):
+        out.insert(0, notcarried.item(
+            "morph_targets", list(morph),
+            "morph targets / shape keys are not carried into the collider (it follows the skeleton only): "
+            + ", ".join(f"{k} ({v})" for k, v in morph.items())))
+    return out
+
+
+def read_warnings(m: SkinnedMesh) -> list:
+    """The reader's findings worth a warning line: its notes, one line per thing not carried
+    (:func:`not_carried`), clips whose resampling off the source's keys errs more than the
+    tolerance, no clip at all."""
+    out = list(m.source.get("notes", []))
+    out += [notcarried.warning_line(x) for x in not_carried(m)]
     for c in m.source.get("clip_info", []):
         if c.get("error_bound_relative", 0.0) > RESAMPLING_RELATIVE:
             out.append(f"clip {c['name']!r}: its keys fall between the {c['fps']:g} fps frames and resampling "
@@ -246,12 +259,15 @@ def read_baked(src, settings: ImportSettings | None = None) -> SkinnedMesh:
     return bake(m, s.up_axis, s.meters_per_unit)[0]
 
 
-def build_collider(src, settings: ImportSettings | None = None, progress=None, stop_after: str | None = None):
+def build_collider(src, settings: ImportSettings | None = None, progress=None, stop_after: str | None = None,
+                   strict: bool = False):
     """Run every stage but ``write``: returns ``(mesh, reports)``.
 
     ``progress(i, n, stage)`` is called before each stage when given.  ``stop_after`` ends the
     run after that stage (``"bind"``: the full mesh a proxy is simplified from; ``"simplify"``:
-    the proxy, or the full mesh when the settings ask for none).
+    the proxy, or the full mesh when the settings ask for none).  ``strict``: raise
+    :class:`InputError` right after ``read`` when the reader met anything it does not carry
+    exactly (:func:`not_carried`).
     """
     if stop_after not in (None, "bind", "simplify"):
         raise ValueError(f"stop_after: expected None, 'bind' or 'simplify', got {stop_after!r}")
@@ -277,6 +293,7 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None, s
                           meters_per_unit=s.source_meters_per_unit or m.meters_per_unit)
         m = m.replace(source={**m.source, "path": os.fspath(src)})
         check_read(m, src)
+        m.source[notcarried.SOURCE_KEY] = not_carried(m)
         info = m.source.get("mesh_info", [])
         rep = StageReport("read", counts={
             "vertices": m.vertex_count, "faces": m.face_count, "joints": m.joint_count,
@@ -293,6 +310,8 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None, s
         return m, rep
 
     mesh = step("read", do_read)
+    if strict and mesh.source[notcarried.SOURCE_KEY]:
+        raise InputError(src, notcarried.strict_refusal(mesh.source[notcarried.SOURCE_KEY]))
     mesh = step("bake", lambda: bake(mesh, s.up_axis, s.meters_per_unit))
     mesh = step("weld", lambda: weld(mesh))
     mesh = step("orient", lambda: orient(mesh))
@@ -310,8 +329,11 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None, s
     return mesh, reports
 
 
-def import_asset(src, out, settings: ImportSettings | None = None, progress=None) -> ImportResult:
+def import_asset(src, out, settings: ImportSettings | None = None, progress=None, strict: bool = False) -> ImportResult:
     """Import the Blender export ``src`` and write the collider asset ``out`` (atomically).
+
+    ``strict``: refuse (:class:`InputError`, nothing written) when the reader met anything it
+    does not carry exactly (``--strict``; :mod:`pipeline.notcarried`).
 
     Raises
     ------
@@ -322,7 +344,7 @@ def import_asset(src, out, settings: ImportSettings | None = None, progress=None
     s = settings or ImportSettings()
     t0 = time.perf_counter()
     check_output_path(out)  # fail before the expensive work
-    mesh, reports = build_collider(src, s, progress)
+    mesh, reports = build_collider(src, s, progress, strict=strict)
     if progress:
         progress(len(s.stages()) - 1, len(s.stages()), "write")
     t1 = time.perf_counter()
@@ -333,6 +355,9 @@ def import_asset(src, out, settings: ImportSettings | None = None, progress=None
         "settings": {k: ("" if v is None else v) for k, v in asdict(s).items()},
         "meshes": mesh_provenance(mesh.source.get("mesh_info", [])),
     }
+    items = mesh.source.get(notcarried.SOURCE_KEY) or []
+    if items:
+        provenance[notcarried.PROVENANCE_KEY] = notcarried.to_provenance(items)
     simp = next((r for r in reports if r.stage == "simplify"), None)
     if simp is not None:
         provenance["proxy"] = proxy_provenance(simp)

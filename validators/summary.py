@@ -73,7 +73,9 @@ def summarize(asset: LoadedAsset) -> dict:
     (``[{"index", "joint", "faces", "radius"}]``) and ``provenance`` (the mesh's
     ``customData["colossus"]``, or ``{}``) and ``proxy`` (a simplified proxy's ``sourceFaces``,
     ``maxDeviation``, ``measuredDeviation``, ``worstClip``, ``worstFrame``, ``worstBone``,
-    ``worstDirection``; None for a full mesh).
+    ``worstDirection``; None for a full mesh) and ``not_carried`` (what the importer met in the
+    source and did not carry exactly: ``[{"what", "where", "detail", "bound_relative"}]``, from
+    the provenance's ``notCarried``; empty when nothing).
     """
     stage = asset.stage
     tcps = float(stage.GetTimeCodesPerSecond())
@@ -149,6 +151,8 @@ def summarize(asset: LoadedAsset) -> dict:
                         "worstBone": _plain(g(schema.PROXY_WORST_BONE)),
                         "worstDirection": _plain(g(schema.PROXY_WORST_DIRECTION))}
     out["meshes"] = [{"name": k, **(v if isinstance(v, dict) else {})} for k, v in (prov.get("meshes") or {}).items()]
+    from colossus.pipeline import notcarried
+    out["not_carried"] = notcarried.from_provenance(prov.get(notcarried.PROVENANCE_KEY))
     return out
 
 
@@ -194,6 +198,12 @@ def format_summary(s: dict) -> str:
         meas = f"{_fmt(meas, '.4g')} measured" if isinstance(meas, (int, float)) else "largest measured"
         lines.append(f"  deviation     <= {_fmt(dev, '.4g') if isinstance(dev, (int, float)) else '-'}{rel}; {meas} at "
                      f"{where}, bone {px['worstBone'] or '-'} ({px['worstDirection'] or '-'})")
+    if s.get("not_carried"):
+        from colossus.pipeline import notcarried
+        lines.append("")
+        lines.append(f"not carried from the source ({len(s['not_carried'])})")
+        for it in s["not_carried"]:
+            lines.append("  " + notcarried.warning_line(it).removeprefix("not carried: "))
     if s.get("meshes"):
         lines.append("")
         lines.append(f"source meshes ({len(s['meshes'])})")

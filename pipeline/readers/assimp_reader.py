@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import InputError
 from .common import AllocationBudget, check_finite, check_input_file
 from .fbx_header import read_anim_stacks, read_global_settings, read_inherit_types, read_morph_geometry
+from . import fbx_checks, fbx_doc
 from .collada_xml import read_clips, read_skins
 from .scene import Animation, Channel, Scene, SceneMesh, Skin
 from .scene.build import build
@@ -301,10 +302,27 @@ def read_assimp(path, meshes=None, fps=None):
     size = check_input_file(path)
     budget = AllocationBudget(path, size)
     ext = os.path.splitext(path)[1].lower()
+    if ext == ".fbx":
+        why = fbx_checks.refusal(fbx_doc.file_version(path))
+        if why:
+            raise InputError(path, why)
     fbx = read_global_settings(path) if ext == ".fbx" else {}
     scene = read_scene(path, budget, fbx)
     up, mpu, note = _source_frame(path, ext, fbx)
     mesh = build(scene, path, meshes=meshes, fps=fps, budget=budget,
                  source={"file": os.path.basename(path), "format": ext.lstrip("."), "reader": "assimp",
                          "frame": note})
+    if ext == ".fbx":  # what the file says about deforming that assimp does not carry (fail closed)
+        doc = fbx_doc.read_document(path)
+        items = fbx_checks.check(doc, mesh, scene)
+        if mesh.source.get("morph_meshes") and doc is not None:
+            m_item, inert = fbx_checks.morph(doc, mesh)
+            mesh.source["morph_meshes"] = {}  # judged here: live channels only
+            if m_item is not None:
+                items.insert(0, m_item)
+            if inert:
+                mesh.source["notes"] = mesh.source.get("notes", []) + [
+                    f"blend shapes of {', '.join(inert)} have DeformPercent 0 at rest and in every curve: "
+                    "nothing of them to carry"]
+        mesh.source["not_carried"] = items
     return mesh.replace(up_axis=up, meters_per_unit=mpu)

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..errors import InputError, one_line
 from ..xforms import compose_trs
+from .. import notcarried
 from .common import AllocationBudget, check_finite, check_input_file
 from .scene import Animation, Channel, Scene, SceneMesh, Skin
 from .scene.build import build
@@ -39,9 +40,115 @@ from .scene.build import build
 _COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _PATHS = {"translation": "t", "rotation": "r", "scale": "s"}
-#: Extensions whose absence would misread geometry: refused when a file requires them.
+#: Extensions a file may require that this reader reads right (materials and textures do not
+#: touch the collider; quantized attributes are plain normalized / integer accessors).
 _SUPPORTED_REQUIRED = {"KHR_materials_unlit", "KHR_texture_transform", "KHR_materials_pbrSpecularGlossiness",
-                       "KHR_texture_basisu", "EXT_texture_webp", "KHR_materials_emissive_strength"}
+                       "KHR_texture_basisu", "EXT_texture_webp", "KHR_materials_emissive_strength",
+                       "KHR_mesh_quantization", "EXT_texture_avif", "MSFT_texture_dds"}
+#: Extensions used (not required) that leave the collider exactly as read: materials, textures,
+#: lights, metadata, and compressions whose uncompressed fallback the file also holds (a file
+#: that needs them requires them, and is refused).
+_HARMLESS_USED = {"KHR_mesh_quantization", "EXT_meshopt_compression", "KHR_draco_mesh_compression",
+                  "KHR_lights_punctual", "FB_ngon_encoding", "KHR_xmp", "KHR_xmp_json_ld",
+                  "MSFT_packing_normalRoughnessMetallic", "MSFT_packing_occlusionRoughnessMetallic",
+                  "VRMC_materials_mtoon", "VRMC_materials_hdr_emissiveMultiplier", "CESIUM_primitive_outline"}
+_HARMLESS_PREFIXES = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "MSFT_texture_", "ADOBE_materials_",
+                      "EXT_lights_")
+#: What the extensions we name do to a collider that does not read them.
+_EXTENSION_EFFECT = {
+    "KHR_animation_pointer": "animation channels that target node transforms or morph weights through JSON "
+                             "pointers are not read",
+    "EXT_mesh_gpu_instancing": "mesh instances placed by per-instance transforms are not read",
+    "VRMC_springBone": "spring-bone secondary motion (simulated at run time) is not carried",
+    "VRMC_node_constraint": "node constraints (aim / roll / rotation) are not carried",
+    "VRMC_vrm": "VRM look-at bones and expressions (driven at run time) are not carried",
+    "VRM": "VRM 0.x secondary animation (spring bones) and blend shape groups are not carried",
+    "KHR_node_visibility": "animated node visibility is not carried",
+}
+
+
+def extension_items(j: dict) -> list:
+    """The :mod:`pipeline.notcarried` records of the extensions a glTF file uses that may change
+    its geometry or deformation and that this reader does not read (one record per extension;
+    ``KHR_animation_pointer`` only when a channel points at node transforms or morph weights)."""
+    used = [e for e in (j.get("extensionsUsed") or []) if isinstance(e, str)]
+    out = []
+    for e in used:
+        if e in _HARMLESS_USED or e in _SUPPORTED_REQUIRED or e.startswith(_HARMLESS_PREFIXES):
+            continue
+        if e == "KHR_animation_pointer":
+            ptrs = []
+            for a in j.get("animations") or []:
+                for ch in (a.get("channels") or []) if isinstance(a, dict) else []:
+                    tgt = ch.get("target") or {} if isinstance(ch, dict) else {}
+                    ptr = ((tgt.get("extensions") or {}).get(e) or {}).get("pointer") if isinstance(tgt, dict) else None
+                    if isinstance(ptr, str) and (ptr.startswith("/nodes/") or
+                                                 (ptr.startswith("/meshes/") and ptr.endswith("/weights"))):
+                        if ptr.startswith("/meshes/") or ptr.rsplit("/", 1)[-1] in (
+                                "translation", "rotation", "scale", "matrix", "weights"):
+                            ptrs.append(ptr)
+            if not ptrs:
+                continue
+            detail = (f"{_EXTENSION_EFFECT[e]}: {len(ptrs)} channel(s), e.g. {', '.join(ptrs[:3])}; the collider "
+                      "does not move with them")
+        else:
+            detail = _EXTENSION_EFFECT.get(e, "extension not read by the collider's glTF reader; it may change "
+                                              "the geometry or the deformation")
+        out.append(notcarried.item("gltf_extension", [e], detail, None))
+    return out
+
+
+def morph_item(j: dict, g, chosen: list, size: float):
+    """The ``morph_targets`` record of the chosen meshes whose morph targets are live (a weight
+    that is not zero, by default or in an animation), with a bound: the sum over targets of the
+    largest weight times the target's largest POSITION offset (mesh space), / ``size``; None when
+    no chosen mesh's targets can move a vertex."""
+    meshes = j.get("meshes") or []
+    nodes = j.get("nodes") or []
+    live, total = [], 0.0
+    for mi, m in enumerate(meshes):
+        name = str(m.get("name") or f"mesh_{mi}")
+        if name not in chosen:
+            continue
+        prims = m.get("primitives") or []
+        nt = max((len(p.get("targets") or []) for p in prims), default=0)
+        if not nt:
+            continue
+        wmax = np.zeros(nt)
+        wmax = np.maximum(wmax, np.abs(np.resize(np.asarray(m.get("weights") or [0.0], float), nt)))
+        users = [i for i, n in enumerate(nodes) if isinstance(n, dict) and n.get("mesh") == mi]
+        for i in users:
+            if nodes[i].get("weights"):
+                wmax = np.maximum(wmax, np.abs(np.resize(np.asarray(nodes[i]["weights"], float), nt)))
+        for a in j.get("animations") or []:
+            smp = a.get("samplers") or []
+            for ch in a.get("channels") or []:
+                tgt = ch.get("target") or {}
+                if tgt.get("path") != "weights" or tgt.get("node") not in users:
+                    continue
+                try:
+                    out = np.abs(g.accessor(smp[ch["sampler"]]["output"], "morph weights").astype(float)).reshape(-1)
+                except (KeyError, IndexError, TypeError, ValueError):
+                    continue
+                if len(out) >= nt:
+                    wmax = np.maximum(wmax, out[: len(out) // nt * nt].reshape(-1, nt).max(axis=0))
+        if not wmax.any():
+            continue
+        reach = np.zeros(nt)
+        for pi, p in enumerate(prims):
+            for ti, t in enumerate(p.get("targets") or []):
+                if "POSITION" in t:
+                    d = g.accessor(t["POSITION"], f"mesh {name!r} primitive {pi} target {ti}").astype(float)
+                    if len(d):
+                        reach[ti] = max(reach[ti], float(np.linalg.norm(d, axis=1).max()))
+        live.append(f"{name} ({nt})")
+        total += float(np.sum(wmax * reach))
+    if not live:
+        return None
+    return notcarried.item(
+        "morph_targets", [x.rsplit(" (", 1)[0] for x in live],
+        "morph targets / shape keys are not carried into the collider (it follows the skeleton only): "
+        + ", ".join(live) + " (bound: largest weights times largest offsets, mesh space)", total / size)
 
 
 class _File:
@@ -211,6 +318,11 @@ def _triangles(mode, idx, path, what):
 
 def read_scene(path, budget: AllocationBudget) -> Scene:
     """Read a glTF 2.0 file into a :class:`Scene` (no joint or mesh choice made yet)."""
+    return _read_scene(path, budget)[0]
+
+
+def _read_scene(path, budget: AllocationBudget):
+    """``(scene, file)``: :func:`read_scene` and the :class:`_File` it read."""
     g = _File(path)
     nodes = g.list("nodes")
     k = len(nodes)
@@ -379,7 +491,7 @@ def read_scene(path, budget: AllocationBudget) -> Scene:
                 chans.append(Channel(int(new[node]), p, t, v, interp))
         anims.append(Animation(str(a.get("name") or ""), chans))
     return Scene(names=names, parents=parents, local=local, meshes=meshes, animations=anims,
-                 sampling_note="glTF samplers read from the file")
+                 sampling_note="glTF samplers read from the file"), g
 
 
 def read_gltf(path, meshes=None, fps=None):
@@ -398,7 +510,7 @@ def read_gltf(path, meshes=None, fps=None):
     budget = AllocationBudget(path, size)
     ext = os.path.splitext(path)[1].lower()
     try:
-        scene = read_scene(path, budget)
+        scene, g = _read_scene(path, budget)
     except (TypeError, KeyError, AttributeError, IndexError, ValueError, OverflowError) as exc:
         # the JSON's values are of the wrong type or shape where the specification fixes them
         # (a number where an object belongs, a missing required property): a malformed file
@@ -406,4 +518,19 @@ def read_gltf(path, meshes=None, fps=None):
     mesh = build(scene, path, meshes=meshes, fps=fps, budget=budget,
                  source={"file": os.path.basename(path), "format": ext.lstrip("."), "reader": "gltf",
                          "frame": "glTF: Y-up metres by specification"})
+    items = extension_items(g.j)
+    if mesh.source.get("morph_meshes"):
+        from .bounds import posed_size
+        try:
+            m_item = morph_item(g.j, g, list(mesh.source["morph_meshes"]), posed_size(mesh))
+        except (TypeError, KeyError, AttributeError, IndexError, ValueError) as exc:
+            raise InputError(path, f"malformed glTF morph targets ({type(exc).__name__}: {one_line(exc, 120)})") from None
+        if m_item is not None:
+            items.insert(0, m_item)
+        else:
+            mesh.source["notes"] = mesh.source.get("notes", []) + [
+                "morph targets of " + ", ".join(f"{k} ({v})" for k, v in mesh.source["morph_meshes"].items())
+                + " have weight 0 by default and in every clip: nothing of them to carry"]
+        mesh.source["morph_meshes"] = {}  # judged here: live targets only
+    mesh.source["not_carried"] = items
     return mesh.replace(up_axis="Y", meters_per_unit=1.0)

@@ -396,4 +396,91 @@ def _read_usd(path, meshes=None, fps=None):
                  source={"file": os.path.basename(path), "format": os.path.splitext(path)[1].lstrip(".").lower(),
                          "reader": "usd", "frame": f"USD stage: upAxis={up}, metersPerUnit={mpu:g}"})
     mesh.source["notes"] = notes + mesh.source["notes"]
+    items, inert = _not_carried(stage, cache, targets, mesh, early)
+    if mesh.source.get("morph_meshes"):
+        mesh.source["morph_meshes"] = {k: v for k, v in mesh.source["morph_meshes"].items() if k not in inert}
+    if inert:
+        mesh.source["notes"].append(f"blend shapes of {', '.join(inert)} have weight 0 in every animation: "
+                                    "nothing of them to carry")
+    mesh.source["not_carried"] = items
     return mesh.replace(up_axis=up, meters_per_unit=mpu)
+
+
+#: Most time codes at which dual-quaternion and linear skinning are compared for a bound.
+DQ_SAMPLES = 64
+
+
+def _not_carried(stage, cache, targets, mesh, early):
+    """``(records, inert)``: the :mod:`pipeline.notcarried` records of what UsdSkel says about the
+    chosen meshes that the collider does not carry (``primvars:skel:skinningMethod =
+    "dualQuaternion"``: bounded by usd-core's own dual-quaternion skinning against its linear
+    skinning at up to :data:`DQ_SAMPLES` of the animation's time codes), and the names of the
+    meshes whose blend shapes have weight 0 in every animation (nothing to carry)."""
+    from pxr import Usd, UsdGeom, UsdSkel, Vt
+    from .. import notcarried
+    from .bounds import posed_size
+
+    items, inert, dq = [], [], []
+    size = None
+    for s, q in targets:
+        prim = q.GetPrim()
+        shapes = UsdSkel.BindingAPI(prim).GetBlendShapesAttr().Get() or []
+        if shapes:
+            sq = cache.GetSkelQuery(s)
+            aq = sq.GetAnimQuery() if sq else None
+            live = False
+            anims = [aq.GetPrim()] if aq else []
+            anims += [p for p in stage.Traverse() if p.IsA(UsdSkel.Animation)]
+            for ap in anims:
+                a = UsdSkel.Animation(ap)
+                names = list(a.GetBlendShapesAttr().Get() or [])
+                attr = a.GetBlendShapeWeightsAttr()
+                cols = [names.index(x) for x in shapes if x in names]
+                if not cols or not attr:
+                    continue
+                times = attr.GetTimeSamples() or [Usd.TimeCode.Default()]
+                for t in times:
+                    w = attr.Get(t)
+                    if w is not None and len(w) and np.any(np.abs(np.asarray(w, dtype=np.float64)[cols]) > 0):
+                        live = True
+                        break
+                if live:
+                    break
+            if not live:
+                inert.append(prim.GetName())
+        if q.GetSkinningMethod() != UsdSkel.Tokens.dualQuaternion:
+            continue
+        sq = cache.GetSkelQuery(s)
+        times = sorted({t for t in (sq.GetAnimQuery().GetJointTransformTimeSamples() if sq and sq.GetAnimQuery() else [])})
+        if len(times) > DQ_SAMPLES:
+            times = [times[i] for i in np.unique(np.round(np.linspace(0, len(times) - 1, DQ_SAMPLES)).astype(int))]
+        times = [Usd.TimeCode(t) for t in times] or [early]
+        pts0 = UsdGeom.Mesh(prim).GetPointsAttr().Get(early)
+        inf = q.ComputeJointInfluences(early)
+        gap = 0.0
+        if pts0 is not None and inf:
+            ji, jw = inf
+            k = q.GetNumInfluencesPerComponent()
+            if q.GetInterpolation() == UsdGeom.Tokens.constant:
+                ji, jw = Vt.IntArray(list(ji) * len(pts0)), Vt.FloatArray(list(jw) * len(pts0))
+            mapper = q.GetJointMapper()
+            for t in times:
+                xf = sq.ComputeSkinningTransforms(t)
+                if mapper and not mapper.IsIdentity():
+                    xf = mapper.RemapTransforms(xf)
+                a, b = Vt.Vec3fArray(pts0), Vt.Vec3fArray(pts0)
+                g = q.GetGeomBindTransform(t)
+                UsdSkel.SkinPoints(UsdSkel.Tokens.classicLinear, g, xf, ji, jw, k, a)
+                UsdSkel.SkinPoints(UsdSkel.Tokens.dualQuaternion, g, xf, ji, jw, k, b)
+                w = np.array(UsdGeom.XformCache(t).GetLocalToWorldTransform(s.GetPrim()), dtype=np.float64)[:3, :3]
+                d = (np.asarray(b, dtype=np.float64) - np.asarray(a, dtype=np.float64)) @ w
+                gap = max(gap, float(np.linalg.norm(d, axis=1).max()) if len(d) else 0.0)
+        if size is None:
+            size = posed_size(mesh)
+        dq.append((prim.GetName(), gap / size))
+    if dq:
+        items.append(notcarried.item(
+            "usd_skinning_method", [n for n, _ in dq],
+            'primvars:skel:skinningMethod = "dualQuaternion": the collider is skinned linearly (bound: usd-core\'s '
+            "dual-quaternion against its linear skinning at the animation's time codes)", max(b for _, b in dq)))
+    return items, inert

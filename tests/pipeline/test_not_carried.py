@@ -1,0 +1,377 @@
+"""Fail closed (issue 20, item 2): what a reader meets and does not carry exactly is named once,
+with a bound where one exists, in the summary, ``--json``, the provenance and ``inspect``;
+``import --strict`` refuses it (exit 1, one line, nothing written).  Files that import right
+get no item.
+
+The small files are made here from real ones: ``samples/limb.fbx`` edited through
+:mod:`references.fbx_write` (written back binary and ASCII), ``samples/limb.glb`` with
+extensions, ``samples/limb.usda`` with dual-quaternion skinning.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from paths import CORPUS, SAMPLES
+from references import fbx_write as W
+
+DCC = CORPUS / "dcc"
+
+
+def _items(path, **kw):
+    from colossus.pipeline.readers import read
+    from colossus.pipeline.run import not_carried
+    return not_carried(read(path, **kw))
+
+
+def _whats(path):
+    return [x["what"] for x in _items(path)]
+
+
+def _cli(*args):
+    from colossus.cli import main
+    return CliRunner().invoke(main, [str(a) for a in args], prog_name="colossus")
+
+
+def _limb(tmp_path, edit, name="limb", ascii_too=True):
+    """``samples/limb.fbx`` edited by ``edit(top)``, written binary (and ASCII): the paths."""
+    version, top, foot = W.read(SAMPLES / "limb.fbx")
+    edit(top)
+    out = [tmp_path / f"{name}.fbx"]
+    W.write_binary(out[0], version, top, foot)
+    if ascii_too:
+        out.append(tmp_path / f"{name}_ascii.fbx")
+        W.write_ascii(out[1], version, top)
+    return out
+
+
+def _one_line_refusal(path, tmp_path, what):
+    """``import --strict`` refuses: exit 1, one line on stderr naming ``what``, nothing written."""
+    out = tmp_path / "strict.usda"
+    r = CliRunner().invoke(__import__("colossus.cli", fromlist=["main"]).main,
+                           ["import", str(path), "-o", str(out), "--strict"], prog_name="colossus")
+    assert r.exit_code == 1, r.output
+    err = r.stderr.strip().splitlines()
+    assert len(err) == 1 and "--strict" in err[0] and what in err[0], err
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------------------ clean files
+@pytest.mark.parametrize("name", ["creature.glb", "creature.fbx", "creature.usda", "limb.glb", "limb.fbx",
+                                  "limb.usda", "limb_flipped.glb"])
+def test_samples_have_nothing_not_carried(name):
+    assert _items(SAMPLES / name) == []
+
+
+#: corpus characters that import right today: no item may fire on them
+CLEAN = ["khronos/Fox.glb", "khronos/RiggedFigure.gltf", "khronos/RiggedSimple.gltf", "khronos/SimpleSkin.gltf",
+         "realworld/godot_mannequiny.glb", "realworld/godot_platformer_player.glb", "realworld/playcanvas_lumberjack.glb",
+         "realworld/threejs_r121_CesiumMan.glb", "realworld/threejs_r121_RobotExpressive.glb",
+         "realworld/ufbx_maya_kenney_character_7700_binary.fbx",
+         "realworld/ufbx_maya_game_sausage_7500_binary_combined.fbx", "realworld/openusd_lbs.usda",
+         "realworld/usdwg_CesiumMan.usdz", "realworld/usdwg_SoC-ElephantWithMonochord.usdc",
+         "assimp/huesitos.fbx", "assimp/animation_with_skeleton.fbx", "assimp/simple-skin-animation-test.usda"]
+
+
+@pytest.mark.parametrize("rel", CLEAN)
+def test_corpus_characters_right_today_have_nothing_not_carried(rel):
+    p = CORPUS / rel
+    if not p.exists():
+        pytest.skip("corpus not present")
+    assert _items(p) == []
+
+
+def test_roundtrip_of_the_fbx_writer_is_clean(tmp_path):
+    """The test files' base: limb.fbx written back binary and ASCII reads like the original."""
+    from colossus.pipeline.readers import read
+    a = read(SAMPLES / "limb.fbx")
+    for p in _limb(tmp_path, lambda top: None):
+        b = read(p)
+        assert _items(p) == []
+        assert b.vertex_count == a.vertex_count and len(b.clips) == len(a.clips) == 1
+        np.testing.assert_allclose(b.clips[0].local, a.clips[0].local, atol=1e-6)
+
+
+# ------------------------------------------------------------------------------ FBX classes
+def _skin(top):
+    return W.find(top, "Deformer", "Skin")[0]
+
+
+def test_fbx_dual_quaternion_skin_warns_once_with_a_bound_and_strict_refuses(tmp_path):
+    paths = _limb(tmp_path, lambda top: W.set_child(_skin(top), "SkinningType", [("S", "DualQuaternion")]))
+    for p in paths:
+        items = _items(p)
+        assert [x["what"] for x in items] == ["fbx_skinning_type"]
+        assert items[0]["where"] == ["Limb"] and 0 < items[0]["bound_relative"] < 1
+    _one_line_refusal(paths[0], tmp_path, "fbx_skinning_type")
+
+
+def test_fbx_blend_skin_fires_only_with_non_zero_blend_weights(tmp_path):
+    def blend(weights):
+        def edit(top):
+            s = _skin(top)
+            W.set_child(s, "SkinningType", [("S", "Blend")])
+            W.set_child(s, "Indexes", [("i", np.arange(4, dtype=np.int32))])
+            W.set_child(s, "BlendWeights", [("d", np.array(weights, dtype=np.float64))])
+        return edit
+    zero = _limb(tmp_path, blend([0, 0, 0, 0]), "zero")
+    half = _limb(tmp_path, blend([0, 0.5, 0, 0]), "half")
+    for p in zero:
+        assert _items(p) == []  # Blend with every weight 0 is linear skinning: right
+    for p in half:
+        assert _whats(p) == ["fbx_skinning_type"]
+    assert _items(half[0])[0]["bound_relative"] == pytest.approx(
+        0.5 * _items(paths_dq(tmp_path))[0]["bound_relative"], rel=1e-6)
+
+
+def paths_dq(tmp_path):
+    return _limb(tmp_path, lambda top: W.set_child(_skin(top), "SkinningType", [("S", "DualQuaternion")]),
+                 "dq", ascii_too=False)[0]
+
+
+def test_fbx_inherit_type_rrss_fires_under_a_non_uniform_scale_only(tmp_path):
+    def edit(scale, inherit):
+        def f(top):
+            W.set_p70(W.find(top, "Model", name="LimbArmature")[0], "Lcl Scaling", "Lcl Scaling", scale)
+            for b in W.find(top, "Model", "LimbNode"):
+                W.set_p70(b, "InheritType", "enum", [inherit], flags="")
+        return f
+    bad = _limb(tmp_path, edit([1.0, 2.0, 1.0], 0), "rrss")
+    for p in bad:
+        items = _items(p)
+        assert [x["what"] for x in items] == ["fbx_inherit_type"] and items[0]["bound_relative"] is None
+    _one_line_refusal(bad[0], tmp_path, "fbx_inherit_type")
+    assert _items(_limb(tmp_path, edit([1.0, 2.0, 1.0], 1), "rsrs", ascii_too=False)[0]) == []
+    assert _items(_limb(tmp_path, edit([2.0, 2.0, 2.0], 0), "uniform", ascii_too=False)[0]) == []
+
+
+def test_fbx_transform_skin_is_bounded_by_the_node_offset(tmp_path):
+    """The mesh node moved after binding (its BindPose matrix kept): the bound is the offset."""
+    def edit(top):
+        m = W.find(top, "Model", "Mesh")[0]
+        p70 = {p.props[0][1]: p for p in m.child("Properties70").children}
+        t = [v for _, v in p70["Lcl Translation"].props[4:]] if "Lcl Translation" in p70 else [0.0, 0.0, 0.0]
+        W.set_p70(m, "Lcl Translation", "Lcl Translation", [t[0] + 0.25, t[1], t[2]])
+    paths = _limb(tmp_path, edit, "moved")
+    from colossus.pipeline.readers import read
+    from colossus.pipeline.readers.bounds import posed_size
+    for p in paths:
+        items = _items(p)
+        assert [x["what"] for x in items] == ["fbx_transform_skin"]
+        m = read(p)
+        # limb.fbx is in centimetres with unit scale 100 (file units): 0.25 file units along x
+        assert items[0]["bound_relative"] == pytest.approx(0.25 / posed_size(m), rel=1e-3)
+    _one_line_refusal(paths[0], tmp_path, "fbx_transform_skin")
+
+
+def test_fbx_geometric_transform_on_a_skinned_mesh(tmp_path):
+    paths = _limb(tmp_path, lambda top: W.set_p70(W.find(top, "Model", "Mesh")[0], "GeometricTranslation",
+                                                  "Vector3D", [0.0, 0.5, 0.0], flags=""), "geo")
+    for p in paths:
+        items = _items(p)
+        assert "fbx_geometric_transform" in [x["what"] for x in items]
+        g = next(x for x in items if x["what"] == "fbx_geometric_transform")
+        assert g["bound_relative"] > 0
+    _one_line_refusal(paths[0], tmp_path, "fbx_geometric_transform")
+
+
+def test_fbx_instanced_skin_and_constraints(tmp_path):
+    def edit(top):
+        mesh = W.find(top, "Model", "Mesh")[0]
+        geo = W.find(top, "Geometry", "Mesh")[0]
+        twin = W.N("Model", [("L", 99001), ("S", "LimbTwin\x00\x01Model"), ("S", "Mesh")],
+                   [c for c in mesh.children], block=True)
+        W.objects(top).children.append(twin)
+        W.connect(top, "OO", 99001, 0)
+        W.connect(top, "OO", W.oid(geo), 99001)
+        con = W.N("Constraint", [("L", 99002), ("S", "aim\x00\x01Constraint"), ("S", "Aim")],
+                  [W.N("Type", [("S", "Aim")])], block=True)
+        W.objects(top).children.append(con)
+        bone = W.find(top, "Model", "LimbNode")[0]
+        W.connect(top, "OP", W.oid(bone), 99002, "Constrained object")
+    for p in _limb(tmp_path, edit, "twin"):
+        whats = _whats(p)
+        assert whats.count("fbx_instanced_skin") == 1 and whats.count("fbx_constraints") == 1
+
+
+def test_fbx_cubic_curve_between_sparse_keys(tmp_path):
+    """Rotation curves cut to their first key and the one farthest from it, with a cubic (ease) segment: the grid
+    frames in between are off the straight line assimp draws; made linear, nothing fires."""
+    def edit(flags):
+        def f(top):
+            for c in W.find(top, "AnimationCurve"):
+                kt = c.child("KeyTime").props[0][1]
+                kv = c.child("KeyValueFloat").props[0][1]
+                if np.ptp(kv) < 1e-3:
+                    continue
+                mid = int(np.argmax(np.abs(kv - kv[0])))  # the key farthest from the first
+                W.set_child(c, "KeyTime", [("l", kt[[0, mid]])])
+                W.set_child(c, "KeyValueFloat", [("f", kv[[0, mid]])])
+                W.set_child(c, "KeyAttrFlags", [("i", np.array([flags], dtype=np.int32))])
+                W.set_child(c, "KeyAttrDataFloat", [("f", np.zeros(4, dtype=np.float32))])
+                W.set_child(c, "KeyAttrRefCount", [("i", np.array([2], dtype=np.int32))])
+        return f
+    cubic = _limb(tmp_path, edit(0x108), "cubic")
+    for p in cubic:
+        items = _items(p)
+        assert [x["what"] for x in items] == ["fbx_curve_interpolation"] and items[0]["bound_relative"] > 1e-3
+    assert _items(_limb(tmp_path, edit(0x104), "linear", ascii_too=False)[0]) == []
+
+
+def test_fbx_before_7_1_is_refused_in_one_line(tmp_path):
+    version, top, foot = W.read(SAMPLES / "limb.fbx")
+    W.set_child(next(n for n in top if n.name == "FBXHeaderExtension"), "FBXVersion", [("I", 6100)])
+    old = tmp_path / "old.fbx"
+    W.write_binary(old, 6100, top, foot)
+    old_ascii = tmp_path / "old_ascii.fbx"
+    W.write_ascii(old_ascii, 6100, top)
+    for p in (old, old_ascii):
+        r = _cli("import", p, "-o", tmp_path / "old.usda")
+        assert r.exit_code == 1
+        err = r.stderr.strip().splitlines()
+        assert len(err) == 1 and "FBX version 6100" in err[0] and "7.1" in err[0], err
+        assert not (tmp_path / "old.usda").exists()
+
+
+# ------------------------------------------------------------------------------ glTF
+def _glb_with(tmp_path, edit, name):
+    data = (SAMPLES / "limb.glb").read_bytes()
+    n = struct.unpack_from("<I", data, 12)[0]
+    j = json.loads(data[20:20 + n])
+    edit(j)
+    js = json.dumps(j).encode()
+    js += b" " * (-len(js) % 4)
+    rest = data[20 + n:]
+    out = tmp_path / f"{name}.glb"
+    body = struct.pack("<II", len(js), 0x4E4F534A) + js + rest
+    out.write_bytes(b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body)
+    return out
+
+
+def test_gltf_extensions_that_move_the_body_are_named(tmp_path):
+    def pointer(j):
+        j["extensionsUsed"] = ["KHR_animation_pointer", "KHR_materials_volume", "VRMC_springBone"]
+        a = j["animations"][0]
+        a["channels"].append({"sampler": a["channels"][0]["sampler"],
+                              "target": {"path": "pointer", "extensions": {
+                                  "KHR_animation_pointer": {"pointer": "/nodes/1/rotation"}}}})
+    p = _glb_with(tmp_path, pointer, "pointer")
+    items = _items(p)
+    assert [(x["what"], x["where"]) for x in items] == [("gltf_extension", ["KHR_animation_pointer"]),
+                                                        ("gltf_extension", ["VRMC_springBone"])]
+    _one_line_refusal(p, tmp_path, "gltf_extension")
+    # used, but only for materials, or pointers at materials: nothing
+    def harmless(j):
+        j["extensionsUsed"] = ["KHR_materials_volume", "KHR_animation_pointer", "KHR_mesh_quantization"]
+    assert _items(_glb_with(tmp_path, harmless, "harmless")) == []
+
+
+def test_gltf_required_extension_not_read_is_refused_in_one_line(tmp_path):
+    p = _glb_with(tmp_path, lambda j: j.update(extensionsUsed=["KHR_draco_mesh_compression"],
+                                               extensionsRequired=["KHR_draco_mesh_compression"]), "draco")
+    r = _cli("import", p, "-o", tmp_path / "d.usda")
+    assert r.exit_code == 1 and len(r.stderr.strip().splitlines()) == 1
+    assert "KHR_draco_mesh_compression" in r.stderr
+
+
+def test_gltf_live_morph_targets_are_bounded_inert_ones_are_not_items(tmp_path):
+    src = CORPUS / "realworld" / "threejs_r121_RobotExpressive.glb"
+    if not src.exists():
+        pytest.skip("corpus not present")
+    data = src.read_bytes()
+    n = struct.unpack_from("<I", data, 12)[0]
+    j = json.loads(data[20:20 + n])
+    j["meshes"][2]["weights"] = [0.5, 0.0, 0.0]  # Head: 'Angry' at half by default
+    js = json.dumps(j).encode()
+    js += b" " * (-len(js) % 4)
+    body = struct.pack("<II", len(js), 0x4E4F534A) + js + data[20 + n:]
+    p = tmp_path / "robot_angry.glb"
+    p.write_bytes(b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body)
+    items = _items(p)
+    assert [x["what"] for x in items] == ["morph_targets"] and items[0]["where"] == ["Head"]
+    assert 0 < items[0]["bound_relative"] < 0.5
+    assert _items(src) == []  # every weight 0 in every clip: nothing not carried
+
+
+# ------------------------------------------------------------------------------ USD
+def test_usd_dual_quaternion_skinning_is_bounded_by_usd_cores_own(tmp_path):
+    from pxr import Usd, UsdGeom, UsdSkel
+    st = Usd.Stage.Open(str(SAMPLES / "limb.usda"))
+    for prim in st.Traverse():
+        if prim.IsA(UsdGeom.Mesh):
+            UsdSkel.BindingAPI(prim).CreateSkinningMethodAttr().Set(UsdSkel.Tokens.dualQuaternion)
+    p = tmp_path / "limb_dq.usda"
+    st.Export(str(p))
+    items = _items(p)
+    assert [x["what"] for x in items] == ["usd_skinning_method"] and items[0]["bound_relative"] > 1e-4
+    _one_line_refusal(p, tmp_path, "usd_skinning_method")
+
+
+def test_numpy_dual_quaternions_agree_with_usd_core(tmp_path):
+    """The FBX bound's dual-quaternion skinning (reader.bounds) is usd-core's: on the USD sample
+    made dual-quaternion, its largest gap to linear skinning at the frames equals usd-core's."""
+    from pxr import Usd, UsdGeom, UsdSkel
+    from colossus.pipeline.readers import read
+    from colossus.pipeline.readers import bounds
+    st = Usd.Stage.Open(str(SAMPLES / "limb.usda"))
+    for prim in st.Traverse():
+        if prim.IsA(UsdGeom.Mesh):
+            UsdSkel.BindingAPI(prim).CreateSkinningMethodAttr().Set(UsdSkel.Tokens.dualQuaternion)
+    p = tmp_path / "limb_dq.usda"
+    st.Export(str(p))
+    usd = _items(p)[0]["bound_relative"]
+    m = read(p)
+    ours = float(bounds.dq_lbs_gap(m).max()) / bounds.posed_size(m)
+    assert ours == pytest.approx(usd, rel=1e-3)
+
+
+# ------------------------------------------------------------------------------ the record
+def test_summary_json_provenance_and_inspect_carry_the_record(tmp_path):
+    p = paths_dq(tmp_path)
+    out = tmp_path / "dq.usda"
+    r = _cli("import", p, "-o", out, "--json")
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)
+    assert [x["what"] for x in s["not_carried"]] == ["fbx_skinning_type"]
+    assert sum("not carried: fbx_skinning_type" in w for w in s["warnings"]) == 1
+    text = _cli("import", p, "-o", out)
+    assert sum(line.startswith("warning: not carried: fbx_skinning_type") for line in text.stdout.splitlines()) == 1
+    from pxr import Usd
+    st = Usd.Stage.Open(str(out))
+    mesh = next(x for x in st.Traverse() if x.GetTypeName() == "Mesh")
+    nc = mesh.GetCustomData()["colossus"]["notCarried"]
+    assert nc["000"]["what"] == "fbx_skinning_type" and nc["000"]["boundRelative"] > 0
+    ins = _cli("inspect", out)
+    assert ins.exit_code == 0 and "not carried from the source (1)" in ins.stdout
+    assert "fbx_skinning_type (Limb)" in ins.stdout
+    js = json.loads(_cli("inspect", out, "--json").stdout)
+    assert js["not_carried"][0]["what"] == "fbx_skinning_type"
+    assert js["not_carried"][0]["bound_relative"] == pytest.approx(s["not_carried"][0]["bound_relative"])
+    # a clean import stores nothing and inspect lists nothing
+    clean = tmp_path / "clean.usda"
+    assert _cli("import", SAMPLES / "limb.fbx", "-o", clean).exit_code == 0
+    assert "not carried" not in _cli("inspect", clean).stdout
+    assert _cli("import", SAMPLES / "limb.fbx", "-o", clean, "--strict").exit_code == 0
+
+
+# ------------------------------------------------------------------------------ the DCC files
+@pytest.mark.parametrize("name, whats", [
+    ("maya_dq_weights_7500_binary.fbx", {"fbx_skinning_type", "fbx_curve_interpolation"}),
+    ("max_transformed_skin_7500_binary.fbx", {"fbx_geometric_transform", "fbx_curve_interpolation"}),
+    ("maya_transformed_skin_7700_binary.fbx", {"fbx_transform_skin", "fbx_curve_interpolation"}),
+])
+def test_dcc_files_are_named_not_silent(name, whats, tmp_path):
+    """Each corpus/dcc file is 0.1 to 0.7 x its size off its tool's own mesh today
+    (tests/references/dcc_errors.py): the import names why, with bounds, and --strict refuses."""
+    p = DCC / name
+    if not p.exists():
+        pytest.skip("corpus not present")
+    items = _items(p)
+    assert {x["what"] for x in items} == whats
+    assert all(x["bound_relative"] is not None and x["bound_relative"] > 0.01 for x in items)
+    _one_line_refusal(p, tmp_path, items[0]["what"])
