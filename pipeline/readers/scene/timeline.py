@@ -74,8 +74,9 @@ def choose_fps(key_seconds: list, hint: float | None = None) -> float:
     """The grid rate for clips whose keys are at ``key_seconds`` (one array per clip).
 
     The file's declared rate ``hint`` if every key falls on it, else the first of
-    :data:`GRID_RATES` that holds every key, else the one holding the most clips (ties: earlier
-    in the list), else :data:`DEFAULT_FPS`.
+    :data:`GRID_RATES` that holds every key, else the source's own regular grid (any rate: 37
+    fps, say), read off its keys (:func:`_own_rate`), else the list's rate holding the most clips
+    (ties: earlier in the list), else :data:`DEFAULT_FPS`.
     """
     clips = [np.asarray(k, dtype=np.float64) for k in key_seconds if len(k) > 1]
     rates = ((float(hint),) if hint and hint > 0 else ()) + GRID_RATES
@@ -88,7 +89,33 @@ def choose_fps(key_seconds: list, hint: float | None = None) -> float:
             return r
         if n > best_n:
             best, best_n = r, n
+    own = _own_rate(clips)
+    if own is not None:
+        return own
     return best if best is not None else DEFAULT_FPS
+
+
+#: Highest rate :func:`_own_rate` reads off a file's keys (the list's highest; finer spacing is not
+#: taken for a frame grid: a clip would be sampled into too many frames).
+MAX_OWN_RATE = 240.0
+
+
+def _own_rate(clips) -> float | None:
+    """The rate of the regular grid every key of every clip sits on, read off the keys: one over
+    the smallest spacing between consecutive keys, rounded to 1e-6 of itself (a file's float32
+    times), when every key falls on it (:func:`_off_grid`) and it is at most
+    :data:`MAX_OWN_RATE`; else None.  A grid the keys use every other frame of is still theirs:
+    no key is resampled."""
+    gaps = np.concatenate([np.diff(np.unique(k)) for k in clips])
+    gaps = gaps[gaps > 0]
+    if not len(gaps):
+        return None
+    r = 1.0 / float(gaps.min())
+    if not (np.isfinite(r) and 0 < r <= MAX_OWN_RATE):
+        return None
+    digits = max(0, 6 - int(np.floor(np.log10(r))) - 1)
+    r = round(r, digits)
+    return r if all(not np.any(_off_grid(k, r)) for k in clips) else None
 
 
 def grid_frames(seconds: np.ndarray, fps: float) -> np.ndarray:
