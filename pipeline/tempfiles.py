@@ -17,6 +17,9 @@ import re
 import time
 
 PREFIX = ".colossus-"
+#: When this process started using this module (about when the command started): a temporary file
+#: older than that whose writer is dead is a killed write's, never one in progress.
+_STARTED = time.time()
 _NAME = re.compile(r"^\.colossus-(\d+)-[0-9a-f]+")
 
 
@@ -42,9 +45,9 @@ def _alive(pid: int) -> bool:
 
 def clean_stale(folder: str, older_than: float | None = None) -> int:
     """Remove the temporary files in ``folder`` whose writer is no longer running and that are
-    older than ``older_than`` (a ``time.time()``; default: one minute ago).  Never raises; returns
-    how many were removed."""
-    limit = time.time() - 60.0 if older_than is None else older_than
+    older than ``older_than`` (a ``time.time()``; default: when this command started).  Never
+    raises; returns how many were removed."""
+    limit = _STARTED if older_than is None else older_than
     removed = 0
     try:
         entries = list(os.scandir(folder))

@@ -122,3 +122,34 @@ def test_killed_parallel_validate_leaves_no_worker(assets, sig):
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def test_killed_write_leaves_nothing_validate_takes(imported, tmp_path):
+    """SIGKILL while the asset is being written leaves a temporary file; ``validate DIR/`` checks
+    only the real asset beside it, and the next write to the folder removes it."""
+    folder = tmp_path / "out"
+    folder.mkdir()
+    _, good = imported("limb", "glb")
+    shutil.copy(good, folder / "limb.usda")
+    out = folder / "creature.usda"
+    left = None
+    for _ in range(5):  # the write stage lasts a fraction of a second: try until caught in it
+        proc = subprocess.Popen(COLOSSUS + ["import", str(SAMPLES / "creature.glb"), "-o", str(out)],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        left = _wait_for(lambda: [p for p in folder.iterdir() if p.name.startswith(".colossus-")
+                                  and p.suffix == ".usda"], 120)
+        proc.kill()
+        proc.wait()
+        if left and not out.exists():
+            break
+        if out.exists():
+            out.unlink()
+    assert left and not out.exists(), "never caught the write in progress"
+    time.sleep(1.1)  # older than the next command's start
+    r = subprocess.run(COLOSSUS + ["validate", str(folder), "--format", "json"], capture_output=True, text=True,
+                       timeout=300)
+    assert [os.path.basename(a["path"]) for a in json.loads(r.stdout)["assets"]] == ["limb.usda"], r.stdout
+    r = subprocess.run(COLOSSUS + ["import", str(SAMPLES / "limb.glb"), "-o", str(folder / "again.usda")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert not [p for p in folder.iterdir() if p.name.startswith(".colossus-")]
