@@ -73,9 +73,14 @@ def _check_arcs(path) -> None:
             if packaged and not (os.path.isabs(ref) or ".." in ref.replace("\\", "/").split("/") or ":" in ref.split("/")[0]):
                 continue
             try:
-                todo.append(resolve(layer, ref, what))
+                target = resolve(layer, ref, what)
             except OutsideReference as e:
                 raise InputError(path, str(e)) from None
+            if os.path.realpath(target) == os.path.realpath(layer):
+                # USD composes a file's reference to itself as a second copy of its prims (a
+                # self-referencing arc doubled an import's geometry): never what an export means
+                raise InputError(path, f"{what} {ref!r}: the file itself (its prims would be composed twice)")
+            todo.append(target)
 
 
 def _open(path):

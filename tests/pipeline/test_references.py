@@ -113,6 +113,22 @@ def _usd_with(path, sublayers=(), reference=None):
     return path
 
 
+def test_usd_source_referencing_itself_is_refused(tmp_path):
+    """A prim that references the file itself composed a second copy of its prims (the import's
+    geometry doubled, exit 0): refused in one line (issue 27 item 3)."""
+    import shutil
+    src = tmp_path / "limb.usda"
+    shutil.copy(SAMPLES / "limb.usda", src)
+    from pxr import Sdf
+    layer = Sdf.Layer.FindOrOpen(str(src))
+    root = layer.rootPrims[0]
+    spec = Sdf.PrimSpec(layer, "Copy", Sdf.SpecifierDef)
+    spec.referenceList.Prepend(Sdf.Reference("limb.usda", root.path))
+    layer.Save()
+    out = tmp_path / "o.usda"
+    assert_refused(run("import", src, "-o", out), out, "the file itself")
+
+
 @pytest.mark.parametrize("case", ["etc-passwd", "dev-zero", "fifo", "outside", "self"])
 def test_usd_source_sublayer_is_checked_before_composing(tmp_path, outside, case):
     """``import`` of a USD source checks every arc before the stage is composed."""
@@ -126,7 +142,7 @@ def test_usd_source_sublayer_is_checked_before_composing(tmp_path, outside, case
     out = tmp_path / "o.usda"
     p = run("import", src, "-o", out)
     needle = {"etc-passwd": "an absolute path", "dev-zero": "an absolute path", "fifo": "is a FIFO",
-              "outside": "leaves the file's folder", "self": "its composition fails: Sublayer hierarchy"}[case]
+              "outside": "leaves the file's folder", "self": "the file itself"}[case]
     assert_refused(p, out, needle)
 
 
