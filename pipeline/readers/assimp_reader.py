@@ -316,7 +316,10 @@ def read_assimp(path, meshes=None, fps=None):
         doc = fbx_doc.read_document(path)
         items = fbx_checks.check(doc, mesh, scene)
         if mesh.source.get("morph_meshes") and doc is not None:
-            m_item, inert = fbx_checks.morph(doc, mesh)
+            try:
+                m_item, inert = fbx_checks.morph(doc, mesh)
+            except fbx_checks.MALFORMED as e:  # fail closed: the shapes are said not carried
+                m_item, inert = fbx_checks.unchecked("the blend shapes", e), []
             mesh.source["morph_meshes"] = {}  # judged here: live channels only
             if m_item is not None:
                 items.insert(0, m_item)

@@ -160,13 +160,30 @@ def check(doc: Document | None, mesh: SkinnedMesh, scene=None) -> list:
     :class:`~pipeline.readers.scene.Scene` it was built from (for the mesh nodes' motion)."""
     if doc is None:
         return []
-    g = _Graph(doc)
-    ctx = _Context(g, mesh, scene)
+    try:
+        g = _Graph(doc)
+        ctx = _Context(g, mesh, scene)
+    except MALFORMED as e:
+        return [unchecked("the file's object graph", e)]
     out = []
     for fn in (_skinning_type, _inherit_type, _transform_skin, _geometric_transform, _instanced_skin,
                _constraints, _curve_interpolation):
-        out += fn(ctx)
+        try:
+            out += fn(ctx)
+        except MALFORMED as e:  # fail closed: what could not be checked is said, never a crash
+            out.append(unchecked(fn.__name__.strip("_").replace("_", " "), e))
     return out
+
+
+#: What malformed FBX data raises in the checks (a hostile or corrupt file: arrays cut short,
+#: values of the wrong type or size).
+MALFORMED = (ValueError, TypeError, IndexError, KeyError, OverflowError, ZeroDivisionError,
+              AttributeError, np.linalg.LinAlgError)
+
+
+def unchecked(what: str, e: BaseException):
+    return notcarried.item("fbx_unchecked", [], f"{what} could not be checked (malformed data: "
+                           f"{type(e).__name__}); what it would say about deformation is not known", None)
 
 
 class _Context:

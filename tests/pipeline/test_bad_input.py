@@ -770,3 +770,26 @@ def test_fbx_count_bomb_hits_the_memory_cap(work, run_import):
     t0 = time.monotonic()
     assert_clean_failure(run_import(src, out), out, "needs more memory than")
     assert time.monotonic() - t0 < 10
+
+
+def test_fbx_checks_on_a_cut_curve_array_fail_closed(work, run_import):
+    """Fuzz campaign case 48 (seed 12): a KeyAttrDataFloat array cut to 3 values crashed the FBX
+    'not carried' checks (internal error); a check that cannot read its data says so in a
+    not-carried warning and the import goes on (--strict refuses it)."""
+    from fuzz.mutators import _fbx_all, fbx_parse, fbx_write
+    src0 = ROOT.parent / "shared" / "corpus" / "assimp" / "animation_with_skeleton.fbx"
+    if not src0.exists():
+        pytest.skip("../shared/corpus not here")
+    version, top, footer = fbx_parse(src0.read_bytes())
+    for n, _, _ in _fbx_all(top):
+        if n.name == b"KeyAttrDataFloat":
+            t, raw = n.props[0]
+            body = np.zeros(3, "<f4").tobytes()
+            n.props[0] = (t, t.encode() + struct.pack("<III", 3, 0, len(body)) + body)
+            break
+    src = work / "cut.fbx"
+    src.write_bytes(fbx_write(version, top, footer))
+    out = work / "o.usda"
+    r = run_import(src, out)
+    assert "internal error" not in r.stderr, r.stderr
+    assert r.returncode in (0, 1), r.stderr
