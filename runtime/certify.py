@@ -166,7 +166,7 @@ def sampled(rig: Rig, skel, tol_abs: float, tol_rel: float, exact=None) -> Sampl
 # -------------------------------------------------------------------- continuous time
 def factor_bounds(clip, times, rest_local):
     """Per sample interval and joint: the local transforms at both ends and the bounds the chain
-    recursion (:func:`runtime.kernels.bounds.chain_bounds`) needs.
+    recursion (:func:`runtime.kernels.interval.chain_bounds`) needs.
 
     For a joint the clip animates, over an interval with ends ``(t0, q0, s0)``, ``(t1, q1, s1)``
     (time normalised to [0, 1]): the translation moves by ``dt = |t1 - t0|`` at constant speed;
@@ -190,7 +190,7 @@ def factor_bounds(clip, times, rest_local):
     resulting error of the linear part, ``e`` forward and ``e / (s_min (s_min - e))`` inverse.
 
     Returns a dict of (I, J, ...) float64 arrays: L0, L1, Li0, Li1, fw, iv, dt, eps (and iso,
-    locals).  Computed by the compiled :func:`runtime.kernels.bounds.factor_terms` (one pass over
+    locals).  Computed by the compiled :func:`runtime.kernels.interval.factor_terms` (one pass over
     the (interval, joint) pairs; it runs on every clip the proof checks)."""
     times = np.asarray(times, dtype=np.float64)
     L, t, q, s = PK.locals_at(clip, times, rest_local, trs=True)
@@ -248,7 +248,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
       world transform, N_J is a similarity at each time and the ratio ``s_lo / s_hi`` is exactly 1.
       Non-uniform scales on the path make the certificate conservative (it may then report an
       interval as undecided).
-    * Chord deviation of a ball's copy: ``delta_b`` of :func:`runtime.kernels.bounds.chain_bounds`.
+    * Chord deviation of a ball's copy: ``delta_b`` of :func:`runtime.kernels.interval.chain_bounds`.
     * Level A1 (continuous test K): ``|y_v(tau) - c| <= a_P max_b (max(e0_b, e1_b) + delta_b +
       lam_b r_b) + eps_P |c_P|`` (the ball's centre is within ``delta_b`` of its chord, whose points
       are within the larger end distance; the ball's points within ``lam_b r_b`` of it).
@@ -258,7 +258,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
       sampled proof's bounds of the farthest vertex at both ends, in J space), so the bound is
       ``max(D0, D1) + min(a_P max_b delta_b, sum_b wmax_b delta_b)``.
     * Level B: the same per vertex, with both ends skinned exactly
-      (:func:`runtime.kernels.bounds.chord_tasks`).
+      (:func:`runtime.kernels.interval.chord_tasks`).
     * Level C: halve the interval (UsdSkel's interpolation evaluated at the midpoint by the
       runtime's port, :mod:`runtime.kernels.pose`); on a sub-interval of fraction f the
       recursion's velocities scale by f and accelerations by f^2 (the magnitudes bounded on the
