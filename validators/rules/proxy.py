@@ -55,8 +55,8 @@ def proxy_deviation(asset, ctx):
                   f"{len(asset.tris)} faces", prim=path)
     limit = ctx.max_deviation
     if limit is not None:
-        value, relative = limit
-        allowed = value * asset.model_size / 100.0 if relative else value
+        from colossus.pipeline.options import resolve_max_deviation
+        allowed = resolve_max_deviation(limit, asset.model_size)
         if dev > allowed:
             where = " ".join(str(asset.mesh.GetCustomDataByKey(k)) for k in (schema.PROXY_WORST_CLIP,
                                                                              schema.PROXY_WORST_FRAME)
