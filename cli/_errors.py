@@ -71,7 +71,9 @@ def maps_errors(input_status: int = 1):
     """Decorate a command so the project's errors become exit statuses, the same way for every
     command (click's ``ClickException``/``UsageError`` pattern):
 
-    * :class:`pipeline.errors.UsageError` -> 2 (usage);
+    * :class:`pipeline.errors.UsageError` -> 2 (usage), and
+      :class:`pipeline.errors.OutputError` -> 2 (the environment: an output folder missing,
+      read-only or full; never "the input is unusable");
     * any other :class:`~runtime.errors.ColossusError` (an unusable input, an unreadable asset,
       an unwritable output) -> ``input_status`` (1 for ``import``; 2 for ``inspect``/``render``,
       whose contract says an unreadable asset is status 2);
@@ -82,7 +84,7 @@ def maps_errors(input_status: int = 1):
 
     click's own exits and usage errors pass through untouched.
     """
-    from colossus.pipeline.errors import UsageError
+    from colossus.pipeline.errors import OutputError, UsageError
 
     def wrap(fn):
         @functools.wraps(fn)
@@ -91,7 +93,7 @@ def maps_errors(input_status: int = 1):
                 return fn(*args, **kwargs)
             except (click.exceptions.Exit, click.ClickException, click.Abort):
                 raise
-            except UsageError as e:
+            except (UsageError, OutputError) as e:  # a bad option, or an output that cannot be written
                 raise CommandError(one_line(e), 2) from None
             except ColossusError as e:
                 raise CommandError(one_line(e, limit=600), input_status) from None

@@ -197,7 +197,7 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
     \b
     Stages: read, bake, weld, orient, bind, [simplify], parts, spheres, write.
     Exit status: 0 written; 1 the input is unusable, or with --strict holds something
-    not carried exactly (nothing written); 2 usage.
+    not carried exactly (nothing written); 2 usage, or an output that cannot be written.
 
     \b
     Several inputs (SRC..., directories, globs): -o is a directory and each input becomes

@@ -179,18 +179,18 @@ def test_unsupported_extension(work, run_import):
 
 def test_output_dir_missing(work, run_import):
     out = work / "no" / "such" / "dir" / "o.usda"
-    assert_clean_failure(run_import(SAMPLES / "limb.glb", out), out, "does not exist")
+    assert_clean_failure(run_import(SAMPLES / "limb.glb", out), out, "does not exist", code=2)
 
 
 def test_output_dir_not_writable(work, run_import):
     out = "/proc/colossus-test.usda"  # not writable, even for root
     proc = run_import(SAMPLES / "limb.glb", out)
-    assert_clean_failure(proc, out, "colossus-test.usda")
+    assert_clean_failure(proc, out, "colossus-test.usda", code=2)  # the environment, not the input
 
 
 def test_output_bad_extension(work, run_import):
     out = work / "o.obj"
-    assert_clean_failure(run_import(SAMPLES / "limb.glb", out), out, "output must end in")
+    assert_clean_failure(run_import(SAMPLES / "limb.glb", out), out, "output must end in", code=2)
 
 
 def test_usage_error_exit_2(work, colossus):
