@@ -285,10 +285,11 @@ def _lbs_time(points, jidx, jw, xforms, serial, repeat=3):
     return best
 
 
-def validate_row(ch: Character) -> dict:
+def validate_row(ch: Character, repeat: int = 2) -> dict:
     """The whole proof ``colossus validate`` runs (read, sampled proof, continuous certificate)
     on one character, beside ``UsdSkel.SkinPointsLBS`` skinning every vertex at every frame it
-    checks (joint transforms given to the baseline, computed outside its timing)."""
+    checks (joint transforms given to the baseline, computed outside its timing).  The proof's
+    two parts are each the best of ``repeat`` runs, the baseline the best of 3."""
     from colossus.validators.asset import LoadedAsset, open_stage
     from colossus.validators.frameproof import prove, skinning_transforms
 
@@ -300,9 +301,11 @@ def validate_row(ch: Character) -> dict:
     rig = a.rig
     t_read = time.perf_counter() - t0
     clips = [ch.only_clip] if ch.only_clip else None
-    proof = prove(a, clips=clips)
-    t_cont = proof.continuous_seconds
-    t_sampled = proof.seconds - t_cont
+    t_sampled = t_cont = np.inf
+    for _ in range(repeat):  # best of ``repeat`` (a shared machine's noise only ever adds time)
+        proof = prove(a, clips=clips)
+        t_cont = min(t_cont, proof.continuous_seconds)
+        t_sampled = min(t_sampled, proof.seconds - proof.continuous_seconds)
     xs = []
     t_joints = 0.0  # what the proof spends reading joint transforms (UsdSkel.AnimQuery), timed apart
     for c in a.clips:
