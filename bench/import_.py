@@ -45,7 +45,7 @@ def bench_import(triangles=200_000, bones=60, clips=2, frames=120, echo=print):
         t_read, _ = _best(lambda: read(src), 3)
         t_contained, _ = _best(lambda: read_isolated(src), 3)
         t_import, res = _best(lambda: import_asset(src, os.path.join(tmp, "bench.usda")), 1)
-    echo(f"import: {nf} triangles, {nv} vertices, {bones} bones, {clips} clips x {frames} frames")
+    echo(f"import (synthetic tube; the real characters follow): {nf} triangles, {nv} vertices, {bones} bones, {clips} clips x {frames} frames")
     echo(f"  assimp load alone            {t_assimp:8.3f} s")
     echo(f"  reader in this process       {t_read:8.3f} s")
     echo(f"  reader contained (forked)    {t_contained:8.3f} s   = +{t_contained - t_read:.3f} s per file to survive "

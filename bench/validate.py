@@ -191,13 +191,14 @@ def _shares(counts, names):
 
 def format_bench(res: dict) -> str:
     m = 1e6
-    lines = [f"frame proof: {res['vertices']} vertices x {res['frames']} frames, {res['joints']} joints, "
+    lines = [f"frame proof (synthetic, best case: a smooth tube; the real-character rows follow): {res['vertices']} vertices x {res['frames']} frames, {res['joints']} joints, "
              f"{res['influences']} influences, {res['threads']} threads",
              f"  UsdSkel.SkinPointsLBS serial:   {res['usd_lbs_serial_seconds']:.3f} s  "
              f"{res['usd_lbs_serial_vertex_frames_per_s'] / m:.1f} M vertex-frames/s",
              f"  UsdSkel.SkinPointsLBS parallel: {res['usd_lbs_parallel_seconds']:.3f} s  "
              f"{res['usd_lbs_parallel_vertex_frames_per_s'] / m:.1f} M vertex-frames/s"]
-    for key, label in (("loose", "benchmark spheres (radius 2)"), ("tight", "tight spheres (2% over the farthest vertex)")):
+    for key, label in (("loose", "synthetic, best case: loose benchmark spheres (radius 2)"),
+                       ("tight", "synthetic: tight spheres (2% over the farthest vertex)")):
         c = res[key]
         par = res["usd_lbs_parallel_seconds"] / c["proof_seconds"]
         lines += [f"  {label}:",
