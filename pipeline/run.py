@@ -216,6 +216,10 @@ def read_warnings(m: SkinnedMesh) -> list:
             out.append(f"clip {c['name']!r}: its keys fall between the {c['fps']:g} fps frames and resampling "
                        f"moves vertices up to {c['error_bound_relative']:.2g} x the model size "
                        f"(more than {RESAMPLING_RELATIVE:g}); import with --fps at the source's rate")
+    for c in m.source.get("clip_info", []):
+        if c.get("shown_pose"):
+            out.append(f"the file has no animation: the pose it shows ({c['shown_pose_moves_relative']:.2g} x the "
+                       f"model size off its bind pose) is the one-frame clip {c['name']!r}")
     if not m.clips:
         out.append("the file has no animation clip; spheres hold for the bind pose only")
     return out

@@ -427,7 +427,40 @@ def _clips(scene: Scene, path, fps, budget, skel: _Skeleton, parents, rest, bind
                                                     positions, ji, jw)
         clips.append(_grid_clip(name, frames, jl))
         clip_info.append(info)
+    if not clips and nj:
+        shown = _shown_pose(nlocal, static_t, static_q, static_s, sub, sub_of, sub_parents, jsub, jparents,
+                            ghost, rest, sub_rrs, bind, positions, ji, jw, path, jnames, taken, rate)
+        if shown is not None:
+            clips.append(shown[0])
+            clip_info.append(shown[1])
     return clips, clip_info, rate
+
+
+#: A file without animation whose node pose moves a vertex more than this (x the model size) off
+#: the bind pose keeps that pose as a one-frame clip (float noise between the two stays out).
+SHOWN_POSE_RELATIVE = 1e-6
+
+
+def _shown_pose(nlocal, static_t, static_q, static_s, sub, sub_of, sub_parents, jsub, jparents, ghost, rest,
+                sub_rrs, bind, positions, ji, jw, path, jnames, taken, rate):
+    """``(clip, info)`` of the pose a file without animation shows (its nodes as written: what the
+    authoring tool, assimp's scene and a glTF viewer display), when it differs from the bind pose
+    by more than :data:`SHOWN_POSE_RELATIVE` x the model size; else None.  The difference is
+    bounded as :func:`_resampling_bound` bounds a pose difference (per joint: the skinning
+    difference's norm over a sphere round the joint's vertices)."""
+    jl = _joint_locals(np.zeros(1), [], nlocal, static_t, static_q, static_s, sub, sub_of, sub_parents, jsub,
+                       jparents, len(ghost), rest, sub_rrs, 0.0, path=path, clip="the shown pose", jnames=jnames)
+    size = model_scale(positions)
+    moved = _resampling_bound(np.zeros(1), 1.0, np.broadcast_to(rest, (1,) + rest.shape).copy(), np.zeros(1), jl,
+                              jparents, bind, positions, ji, jw)
+    if not (size > 0 and moved > SHOWN_POSE_RELATIVE * size):
+        return None
+    name = clip_name("pose", taken)
+    info = {"name": name, "source_name": "", "source_keys": 0, "interpolation": "STEP", "frames": 1, "fps": rate,
+            "keys_on_grid": True, "first_frame": 0.0, "last_frame": 0.0, "shown_pose": True,
+            "shown_pose_moves_relative": float(moved / size),
+            "sampling": "the pose the file shows (no animation): one frame"}
+    return _grid_clip(name, np.zeros(1), jl), info
 
 
 def _grid_clip(name, frames, local) -> Clip:
