@@ -360,8 +360,10 @@ def test_contained_call_quiet_and_fallback(capfd, monkeypatch):
 def test_contained_child_deadlocked_at_the_fork_is_forked_again(monkeypatch):
     """Another thread holds a lock at the fork (as usd-core's background workers can): the child
     inherits it held by a thread it does not have and sleeps forever.  Without the stall watch
-    that is a timeout (a false "took too long" after READ_TIMEOUT seconds); with it the child is
-    killed after STALL_SECONDS asleep without CPU and forked again, once the lock is free."""
+    that is a timeout (a false "took too long" after READ_TIMEOUT seconds).  Serialised around
+    the fork (the lock passed as a guard: issue 26 item 6) the child never inherits it held, with
+    the watch off and STALL_SECONDS out of reach; the watch (for callers that cannot serialise)
+    kills a child asleep without CPU for STALL_SECONDS and forks it again, once the lock is free."""
     import threading
 
     from colossus.pipeline import isolation
@@ -379,7 +381,7 @@ def test_contained_child_deadlocked_at_the_fork_is_forked_again(monkeypatch):
             held.set()
             time.sleep(seconds)
 
-    def race(hold_s, timeout):
+    def race(hold_s, timeout, **kw):
         held = threading.Event()
         t = threading.Thread(target=hold, args=(hold_s, held))
         t.start()
@@ -387,7 +389,7 @@ def test_contained_child_deadlocked_at_the_fork_is_forked_again(monkeypatch):
         try:
             t0 = time.monotonic()
             try:
-                return contained(needs_the_lock, timeout=timeout), time.monotonic() - t0
+                return contained(needs_the_lock, timeout=timeout, **kw), time.monotonic() - t0
             except ChildFailed as e:
                 return e, time.monotonic() - t0
         finally:
@@ -397,11 +399,53 @@ def test_contained_child_deadlocked_at_the_fork_is_forked_again(monkeypatch):
     monkeypatch.setattr(isolation, "STALL_SECONDS", 1e9)  # no watch: the deadlock is real
     got, _ = race(0.3, timeout=2.0)
     assert isinstance(got, ChildFailed) and got.timed_out
+    # serialised: the fork waits for the holder (0.3 s), no watch, no re-fork
+    got, seconds = race(0.3, timeout=5.0, guards=[lock], watch=False)
+    assert got == 42 and seconds < 2, (got, seconds)
     monkeypatch.setattr(isolation, "STALL_SECONDS", 1.0)
     got, seconds = race(0.3, timeout=30.0)
     assert got == 42 and seconds < 10, (got, seconds)
     # a child that works (uses CPU) for longer than STALL_SECONDS is not taken for a deadlock
     assert contained(_spin, 2.5, timeout=30.0) > 0
+
+
+def test_validate_probes_fork_with_usd_core_serial(tmp_path, monkeypatch):
+    """Issue 26 item 6 with usd-core itself: ``validate --jobs 1`` probes crate assets in forked
+    children while usd-core is serial (no usd-core thread exists to hold a lock at the fork), so
+    the probes are not watched and need no re-fork: with STALL_SECONDS out of reach and a 20 s
+    probe timeout, 12 crate assets whose stages the parent opened and dropped in between (the
+    background frees that used to deadlock a child) all validate without a COL001."""
+    from pxr import Sdf, Work
+
+    from colossus.pipeline import isolation
+    from colossus.validators import parallel
+    if not isolation.available():
+        pytest.skip("needs os.fork")
+    monkeypatch.setattr(isolation, "STALL_SECONDS", 1e9)
+    monkeypatch.setattr(parallel, "PROBE_TIMEOUT", 20.0)
+    from colossus.pipeline.run import import_asset
+    base = tmp_path / "base.usda"
+    import_asset(SAMPLES / "limb.glb", base)
+    paths = []
+    for i in range(12):
+        p = tmp_path / f"a{i:02d}.usdc"
+        Sdf.Layer.FindOrOpen(str(base)).Export(str(p))
+        paths.append(str(p))
+    seen = []
+    probe = parallel.contained
+
+    def spy(fn, *a, **kw):
+        seen.append((Work.GetConcurrencyLimit(), kw.get("watch")))
+        return probe(fn, *a, **kw)
+    monkeypatch.setattr(parallel, "contained", spy)
+    limit = Work.GetConcurrencyLimit()
+    t0 = time.monotonic()
+    res = parallel.check_many(paths, jobs=1)
+    assert time.monotonic() - t0 < 60
+    assert seen == [(1, False)] * 12, seen
+    assert Work.GetConcurrencyLimit() == limit  # restored after the run
+    for r in res.reports:
+        assert not any(f.code == "COL001" for f in r.findings), r.findings
 
 
 def _spin(seconds):
