@@ -74,6 +74,11 @@ def is_crate(path) -> bool:
 
 
 def _probe(path):
+    with _quiet():  # COLOSSUS_ISOLATE=0 runs it in this process: usd-core's chatter stays off stderr
+        return _probe_read(path)
+
+
+def _probe_read(path):
     """Read everything of the asset that usd-core decodes natively: the stage, the arrays
     :class:`validators.asset.LoadedAsset` reads, and every time sample of every clip (crate
     values are decoded lazily, on first read).  Returns None, or the ``COL001`` message of
