@@ -187,7 +187,7 @@ _USD_LINE = re.compile(r"Warning: in \w+ at line|Error in '|_ReportErrors|pxrInt
 
 def usd_lines(text: str) -> list:
     """The lines of ``text`` that are usd-core's own diagnostics."""
-    return [ln for ln in text.splitlines() if _USD_LINE.search(ln)]
+    return [ln for ln in text.splitlines() if _USD_LINE.search(ln) and not ln.startswith("error: ")]
 
 
 def _judge_references(problems, watch, case_dir, where):
@@ -253,7 +253,7 @@ def _judge_error_line(problems, code, stderr, where, src=""):
         problems.append(f"{where}: internal error {m.group(1)}: {_norm(line.split(m.group(1), 1)[1])}")
     if "out of memory" in line:  # our MemoryError mapping: an allocation escaped the readers' budget
         problems.append(f"{where}: out of memory (an allocation escaped the budget)")
-    if "Error in 'pxrInternal" in line or "Error in 'pxr" in line:
+    if "Error in 'pxrInternal" in line or "Error in 'pxr" in line or "pxrInternal_" in line:
         problems.append(f"{where}: usd-core's raw error text (function, source line) not reduced to its reason")
     if len(line) - line.count(src) * len(src) > MAX_MESSAGE:
         problems.append(f"{where}: message of {len(line)} characters")
