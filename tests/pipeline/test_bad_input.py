@@ -467,6 +467,27 @@ def test_reader_isolation_can_be_switched_off(work, monkeypatch):
 
 
 # ---- fixed classes ---------------------------------------------------------------------------
+def test_glb_transform_singular_as_stored_is_one_line(work, run_import):
+    """Fuzz case 147 of campaign 12 (issue 26 item 7's run): a bufferView's byteStride set to 1
+    makes an animation's scale keys tiny but non-zero (check_read passes them); stored in half
+    precision they are 0 and the spheres stage met a singular matrix (an internal error after a
+    NumPy warning).  Now one line."""
+    from paths import CORPUS
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    from fuzz.mutators import _JSON, glb_join, glb_split
+    seed = CORPUS / "realworld" / "godot_platformer_player.glb"
+    if not seed.exists():
+        pytest.skip("the third-party corpus is not beside the repository")
+    doc, chunks = glb_split(seed.read_bytes())
+    doc["bufferViews"][255]["byteStride"] = 1
+    chunks[0] = (_JSON, json.dumps(doc, separators=(",", ":")).encode())
+    src = work / "case.glb"
+    src.write_bytes(glb_join(chunks))
+    proc = run_import(src, work / "out.usda")
+    assert_clean_failure(proc, work / "out.usda", "not invertible as stored")
+
+
 def test_glb_zero_scale_key_is_one_line(work, run_import):
     """Fuzz class 'internal error (LinAlgError: Singular matrix)' (.glb): a leaf joint animated to
     scale 0 reached np.linalg.inv in the spheres stage; now rejected at the read."""
