@@ -1194,14 +1194,26 @@ def mutators_for(ext: str, data: bytes) -> dict:
     return table
 
 
-def mutate(data: bytes, ext: str, rng, structured: float = 0.7, stack: float = 0.2):
+#: Share of the cases of a format with a reference mutator (``*_refs``) that get one first.
+REFS_SHARE = 0.15
+
+
+def mutate(data: bytes, ext: str, rng, structured: float = 0.7, stack: float = 0.2, refs: float = REFS_SHARE):
     """Mutate ``data`` (a file of extension ``ext``); returns ``(bytes, [(mutator, what), ...])``.
 
-    A structure-aware mutator with probability ``structured`` (when the format has any),
-    else a byte-level one; with probability ``stack`` a second mutation on top.  Deterministic
-    for a given ``rng`` state.
+    With probability ``refs`` (when the format has a reference mutator) that one first; then a
+    structure-aware mutator with probability ``structured`` (when the format has any), else a
+    byte-level one; with probability ``stack`` a second mutation on top.  Deterministic for a
+    given ``rng`` state.
     """
     steps = []
+    ref = next((n for n in sorted(FORMAT_MUTATORS.get(ext, {})) if n.endswith("_refs")), None)
+    if ref and rng.random() < refs:
+        try:
+            data, what = FORMAT_MUTATORS[ext][ref](data, rng)
+            steps.append((ref, what))
+        except NotApplicable:
+            pass
     for _ in range(2 if rng.random() < stack else 1):
         fmt = mutators_for(ext, data)
         pool = fmt if fmt and rng.random() < structured else BYTE_MUTATORS
