@@ -835,3 +835,18 @@ def test_fbx_count_bomb_hits_the_memory_cap(work, run_import):
     t0 = time.monotonic()
     assert_clean_failure(run_import(src, out), out, "needs more memory than")
     assert time.monotonic() - t0 < 10
+
+
+def test_fbx_cut_curve_attribute_array_is_not_an_internal_error():
+    """Fuzz case 48 of campaign 12 (main's case plan, found while checking issue 26 item 7's
+    campaign time): a KeyAttrDataFloat array cut to 3 values (not a multiple of a key's 4) made
+    the curve-interpolation check's reshape fail, an internal error.  Whole keys are kept."""
+    from colossus.pipeline.readers.fbx_checks import _per_key
+
+    class Node:
+        def value(self, name):
+            return None
+    a = _per_key(Node(), [0.0, 1.0, 2.0], 2, width=4)
+    assert a.shape == (2, 4)
+    b = _per_key(Node(), list(range(9)), 3, width=4)
+    assert b.shape == (3, 4) and (b[2] == b[1]).all()
