@@ -32,7 +32,18 @@ would hang on a lock some other thread held at fork time.  Such a child sleeps a
 usd-core's reader then needs leaves the child waiting forever).  So on Linux the parent watches
 its child: one that has slept without using any CPU for :data:`STALL_SECONDS` is killed and
 forked again, once (the lock's holder, in the parent, has long finished by then); a second
-stall waits for the timeout as before.  Python's "this process is
+stall waits for the timeout as before.
+
+A caller that can do better serialises instead of watching (issue 26 item 6): ``guards`` are
+locks the forking thread takes before the fork and releases after it (in the parent and in the
+child), so no other thread holds them at that moment; and :func:`usd_serial` keeps usd-core's
+own work (parallel loops, the detached tasks that free stages) on the calling thread, so at a
+fork from that thread no usd-core thread is in the middle of anything.  ``validate --jobs 1``
+probes crate assets that way, with the watch off (``watch=False``).  The watch stays on by
+default because :func:`read_isolated` (``colossus import``) forks from a process that may have
+usd-core, numba or Dask threads at work (a multi-file import writes stages between reads, and
+keeping usd-core serial there would cost its writer its threads): there a stall is still
+possible, and the watch is what turns it into a re-fork instead of a false timeout.  Python's "this process is
 multi-threaded, use of fork() may lead to deadlocks" ``DeprecationWarning`` is silenced for that
 reason.  Where ``os.fork`` does not exist, or ``COLOSSUS_ISOLATE=0``, the call runs in-process.
 
@@ -54,6 +65,7 @@ import tempfile
 import time
 import traceback
 import warnings
+from contextlib import ExitStack, contextmanager
 
 from .errors import ColossusError, InputError, one_line
 
@@ -264,7 +276,37 @@ def _native_tail(fh) -> str:
     return one_line(lines[-1], limit=160) if lines else ""
 
 
-def contained(fn, *args, path: str = "", timeout: float | None = None, memory: int | None = None, **kwargs):
+@contextmanager
+def usd_serial():
+    """usd-core runs all its work on the calling thread while this lasts (``Work`` concurrency 1:
+    TBB gets no worker thread, and ``WorkRunDetachedTask``, which frees stages in the background,
+    runs the task inline).  A fork from that thread then cannot copy a lock a usd-core thread
+    holds.  The previous limit is restored on exit.  Costs usd-core its parallel loops (small
+    assets: nothing measurable; see ``validators.parallel.check_many``)."""
+    try:
+        from pxr import Work
+    except ImportError:  # pragma: no cover - usd-core is a dependency
+        yield
+        return
+    before = Work.GetConcurrencyLimit()
+    Work.SetConcurrencyLimit(1)
+    try:
+        yield
+    finally:
+        Work.SetConcurrencyLimit(before)
+
+
+def usd_is_serial() -> bool:
+    """Whether usd-core runs on the calling thread only (inside :func:`usd_serial`)."""
+    try:
+        from pxr import Work
+    except ImportError:  # pragma: no cover
+        return True
+    return Work.GetConcurrencyLimit() <= 1
+
+
+def contained(fn, *args, path: str = "", timeout: float | None = None, memory: int | None = None,
+              guards=(), watch: bool = True, **kwargs):
     """``fn(*args, **kwargs)`` in a forked child; its return value, or its exception raised here.
 
     Parameters
@@ -277,6 +319,12 @@ def contained(fn, *args, path: str = "", timeout: float | None = None, memory: i
         Seconds before the child is killed (None: no limit), a re-fork after a stall included.
     memory : int, optional
         Bytes of address space the child may add to what it has at the fork (None: no cap).
+    guards : sequence of locks
+        Taken (``with``) by this thread just before the fork and released just after it, in
+        both processes: a thread of ours that uses one cannot hold it at the fork.
+    watch : bool
+        The stall watch (:data:`STALL_SECONDS`); a caller that serialises usd-core
+        (:func:`usd_serial`) and passes its locks as ``guards`` turns it off.
 
     Raises
     ------
@@ -288,16 +336,16 @@ def contained(fn, *args, path: str = "", timeout: float | None = None, memory: i
     if not available():
         return fn(*args, **kwargs)
     deadline = None if timeout is None else time.monotonic() + timeout
-    got = _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch=True)
+    got = _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch=watch, guards=guards)
     if got is _STALLED:  # deadlocked at the fork: once more (the second is not watched)
-        got = _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch=False)
+        got = _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch=False, guards=guards)
     return got
 
 
 _STALLED = object()
 
 
-def _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch):
+def _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch, guards=()):
     """One fork of :func:`contained`: the result, or :data:`_STALLED` when ``watch`` and the
     child slept without using CPU for :data:`STALL_SECONDS` (it was killed)."""
     for stream in (sys.stdout, sys.stderr):  # buffered text must not be written twice
@@ -313,6 +361,9 @@ def _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch):
             # the collector would write to the header of every object the parent made, each write
             # a copy-on-write page fault in the child: freeze them out of its view, and do not
             # collect in the short-lived child at all
+            held = ExitStack()
+            for g in guards:  # serialised: no other thread of ours holds one at the fork
+                held.enter_context(g)
             gc.freeze()
             pid, parent = -1, os.getpid()
             try:
@@ -322,6 +373,7 @@ def _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch):
             finally:
                 if pid != 0:
                     gc.unfreeze()
+                held.close()  # the child too: the forking thread took them, the forking thread releases
         if pid < 0:
             os.close(write_fd)
             err.close()

@@ -15,6 +15,9 @@ _TF_REASON = re.compile(r"file \S+ : '(.+?)'(?: Error in|$)")
 #: A quoted run (``"..."`` or ``'...'``) longer than this is cut: parsers quote the bytes they
 #: choked on (assimp's ``Cannot parse string "p.375 0.25 0.375 ..."``).
 QUOTE_LIMIT = 60
+#: usd-core's C++ namespace in the names its text parser quotes (``parse error matching
+#: pxrInternal_v0_26_11__pxrReserved__::Sdf_TextFileFormatParser::TupleValueClose``): dropped.
+_PXR_NAMESPACE = re.compile(r"pxrInternal_v\d+(?:_\d+)*__pxrReserved__(?:_pegtl)?::")
 _LONG_QUOTE = re.compile(r"""(["'])([^"']{%d,})\1""" % (QUOTE_LIMIT + 1))
 
 
@@ -49,6 +52,7 @@ def one_line(e: BaseException | str, limit: int = 300) -> str:
     m = _TF_REASON.search(text)
     if m:
         text = m.group(1)
+    text = _PXR_NAMESPACE.sub("", text)
     text = _LONG_QUOTE.sub(lambda q: f"{q.group(1)}{q.group(2)[:QUOTE_LIMIT - 3].rstrip()}...{q.group(1)}", text)
     if len(text) > limit:
         text = text[: max(0, limit - 3)].rstrip() + "..."

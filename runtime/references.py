@@ -114,10 +114,14 @@ def layer_references(path, composition_only: bool = False) -> list:
             if spec is None or not spec.HasInfo("clips"):
                 return
             for sets in spec.GetInfo("clips").values():
+                if not hasattr(sets, "get"):
+                    continue
                 for key in ("assetPaths", "manifestAssetPath"):
                     v = sets.get(key)
                     items = [] if not v else [v] if isinstance(v, str) or hasattr(v, "path") else list(v)
-                    out += [getattr(a, "path", str(a)) for a in items]
+                    # extend, not +=: out is the enclosing function's (an UnboundLocalError made every
+                    # USD source with value clips an internal error; fuzz campaign 13, case 32)
+                    out.extend(getattr(a, "path", str(a)) for a in items)
 
         layer.Traverse(Sdf.Path.absoluteRootPath, clips)
         return sorted(set(p for p in out if p))

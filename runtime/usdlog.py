@@ -57,6 +57,11 @@ class quiet_stderr:
         self._scratch = tempfile.TemporaryFile()
         self._saved = os.dup(2)
         os.dup2(self._scratch.fileno(), 2)
+        # boost.python prints through Python's sys.stderr (PyErr_Print), which is fd 2 in a real
+        # process but a replaced object under click's CliRunner (or any embedding): the same file
+        self._py = sys.stderr
+        self._text = open(os.dup(self._scratch.fileno()), "w", encoding="utf-8", errors="replace")
+        sys.stderr = self._text
         return self
 
     def __exit__(self, *exc):
@@ -64,6 +69,9 @@ class quiet_stderr:
             sys.stderr.flush()
         except Exception:
             pass
+        if sys.stderr is self._text:
+            sys.stderr = self._py
+        self._text.close()
         os.dup2(self._saved, 2)
         os.close(self._saved)
         if os.environ.get("COLOSSUS_DEBUG"):

@@ -24,12 +24,13 @@ result.  Ctrl-C returns what finished; :func:`validators.report.render` marks su
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from dataclasses import dataclass, field
 
 from colossus.pipeline.engine import Engine, InlineBackend, Progress, Task, expand_inputs, make_backend
-from colossus.pipeline.isolation import ChildFailed, contained
+from colossus.pipeline.isolation import ChildFailed, contained, usd_is_serial, usd_serial
 from colossus.pipeline.readers import USD_EXTENSIONS
 
 from .runner import OPEN_FAILED, READ_FAILED, _crash_report, check_asset, unreadable_report
@@ -73,6 +74,11 @@ def is_crate(path) -> bool:
 
 
 def _probe(path):
+    with _quiet():  # COLOSSUS_ISOLATE=0 runs it in this process: usd-core's chatter stays off stderr
+        return _probe_read(path)
+
+
+def _probe_read(path):
     """Read everything of the asset that usd-core decodes natively: the stage, the arrays
     :class:`validators.asset.LoadedAsset` reads, and every time sample of every clip (crate
     values are decoded lazily, on first read).  Returns None, or the ``COL001`` message of
@@ -118,7 +124,9 @@ def unit_check_contained(path, kw):
     """
     if is_crate(path) and os.access(path, os.R_OK):
         try:
-            message = contained(_probe, path, path=path, timeout=PROBE_TIMEOUT)
+            # no stall watch when usd-core is serial (check_many's --jobs 1 run is): the child
+            # cannot have inherited a usd-core lock, so a sleeping child is a real hang
+            message = contained(_probe, path, path=path, timeout=PROBE_TIMEOUT, watch=not usd_is_serial())
         except ChildFailed as e:
             what = "reading it took too long" if e.timed_out else f"usd-core crashed reading it ({e})"
             return _crash_report(path, what, kw)
@@ -253,8 +261,13 @@ def check_many(paths, jobs=1, scheduler=None, progress=False, split_bytes=SPLIT_
     order = sorted(range(len(assets)), key=lambda i: -sizes[i]) if parallel else range(len(assets))
     tasks = [split_task(i) if split and sizes[i] >= split_bytes else check_task(i) for i in order]
     engine = Engine(backend)
+    # --jobs 1 forks a probe per crate asset from this process: usd-core serial for the run, so no
+    # usd-core thread holds a lock at a fork (issue 26 item 6; a stage freed in the background
+    # used to leave a probe asleep until the stall watch re-forked it 20 s later)
+    serial = usd_serial() if isinstance(backend, InlineBackend) else contextlib.nullcontext()
     try:
-        engine.run(tasks)
+        with serial:
+            engine.run(tasks)
     finally:
         bar.close()
     done = [r for r in reports if r is not None]

@@ -660,7 +660,8 @@ def _per_key(n, arr, k, width=1):
     if width == 1:
         a = a.astype(np.float64).astype(np.int64) if a.dtype != np.int64 else a
     else:
-        a = np.asarray(a, dtype=np.float64).reshape(-1, width)
+        a = np.asarray(a, dtype=np.float64).ravel()
+        a = a[:len(a) // width * width].reshape(-1, width)  # a cut array: whole keys only (fuzz case 48)
     if refs is not None:
         refs = np.asarray(refs, dtype=np.int64)
         if len(refs) == len(a) and refs.sum() >= k:

@@ -72,3 +72,54 @@ def test_glb_mutators_keep_the_container():
 @pytest.mark.parametrize("ext", [".glb", ".gltf", ".fbx", ".usda", ".usdc", ".usdz", ".dae"])
 def test_every_format_has_structure_aware_mutators(ext):
     assert mutators.FORMAT_MUTATORS[ext]
+
+
+def test_reference_mutator_points_outside():
+    """Issue 26 item 7: the reference mutator rewrites what a file refers to (glTF buffer/image
+    URIs, USD arcs) with the placeholders the oracle makes real, for every target kind."""
+    seen = set()
+    for ext, name, fn in ((".glb", "limb.glb", mutators.glb_refs), (".usda", "limb.usda", mutators.usda_refs)):
+        data = (SAMPLES / name).read_bytes()
+        for k in range(40):
+            out, what = fn(data, np.random.default_rng(k))
+            assert out != data, what
+            seen.add(what.split(" -> ")[0].split(": ", 1)[-1].split()[0])
+    assert {"buffer", "image", "USD"} <= seen or {"buffer", "image"} <= seen, seen
+    assert "gltf_refs" in mutators.FORMAT_MUTATORS[".gltf"] and "usda_refs" in mutators.FORMAT_MUTATORS[".usda"]
+
+
+def test_reference_oracle_sees_a_read_outside(tmp_path):
+    """The oracle's watch sees a file outside the case's folder opened by the contained reader
+    (a forked child): an import allowed outside (--allow-outside-references) reads the canary,
+    and the case is bad; the same case without the flag is refused and good."""
+    import json as _json
+
+    from fuzz import oracle
+    data = (SAMPLES / "limb.glb").read_bytes()
+    doc, chunks = mutators.glb_split(data)
+    # the BIN chunk as a file outside, the buffer pointing at it by absolute path
+    doc["buffers"][0]["uri"] = mutators.OUT + "/canary.bin"
+    chunks = [(chunks[0][0], mutators._json_bytes(doc))]
+    case = {"index": 0, "campaign": 0, "kind": "import", "seed": str(SAMPLES / "limb.glb"), "ext": ".glb",
+            "subprocess": False}
+    rec = oracle.run_case(case, data=mutators.glb_join(chunks))
+    assert rec["outcome"] == "rejected" and not rec["problems"], rec
+    case_dir, outside = oracle.layout(str(tmp_path))
+    src = tmp_path / "case" / "case.glb"
+    src.write_bytes(oracle.materialise(mutators.glb_join(chunks), ".glb", outside, "case.glb"))
+    watch = oracle.OpenWatch([case_dir, outside])
+    try:
+        oracle._invoke(["import", str(src), "-o", str(tmp_path / "o.usda"), "--allow-outside-references"])
+        problems = []
+        oracle._judge_references(problems, watch, case_dir, "import")
+    finally:
+        watch.close()
+    assert problems and "outside the case's folder" in problems[0], problems
+    assert _json.dumps(problems)
+
+
+def test_usd_lines_are_recognised():
+    from fuzz import oracle
+    text = ("Warning: in _ReportErrors at line 3177 of /src/pxr/usd/usd/stage.cpp -- In </root>: x\n"
+            "error: a.usda: reference 'x': is a FIFO, not a regular file\n")
+    assert len(oracle.usd_lines(text)) == 1

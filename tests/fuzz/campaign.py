@@ -118,7 +118,7 @@ class Summary:
         lines.append("  cases per format: " + ", ".join(f"{k} {v}" for k, v in sorted(self.by_format.items())))
         lines.append("  outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(self.outcomes.items())))
         lines.append("  mutators: " + ", ".join(f"{k} {v}" for k, v in sorted(self.by_mutator.items())))
-        lines.append(f"  validate cases with usd-core diagnostics on stderr (noted, not judged): {self.noise}")
+        lines.append(f"  validate cases with native stderr output (judged: each is a bad outcome too): {self.noise}")
         lines.append("  slowest: " + ", ".join(f"#{i} {n} {s:.1f} s" for s, i, n in self.slowest))
         for cls, recs in sorted(self.bad.items(), key=lambda kv: -len(kv[1])):
             r = recs[0]

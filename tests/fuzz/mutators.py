@@ -26,6 +26,10 @@ usda        numbers, tokens (types, interpolation, elementSize, joint paths, rel
 usdc        the crate's bootstrap (TOC offset, version), its TOC (section counts, starts,
             sizes) and the bytes of one named section or of the value data
 usdz        the inner layer's bytes in place (zip sizes kept), crate mutators on an inner usdc
+refs        what a file refers to (``gltf_refs``, ``glb_refs``, ``usda_refs``): glTF buffer and
+            image URIs, USD sublayers, references, payloads, a variant's payload and value clips
+            pointed at absolute paths, ``..`` escapes, ``file:`` URIs, FIFOs, devices,
+            directories, symlinks out, a symlink loop, the file itself (:data:`REF_TARGETS`)
 dae         XML: count/stride/offset attributes, array values, zeroed matrices, references,
             removed and duplicated elements, broken tags
 text        numbers and lines (``.x``, ``.md5mesh``, ASCII FBX, and every other text format)
@@ -1036,14 +1040,139 @@ def dae_elements(data, rng):
     return data[:at] + data[end:], f"DAE closing tag at {at} removed"
 
 
+# ====================================================================== references (issue 26 item 7)
+#: Placeholders a reference mutation writes; :func:`tests.fuzz.oracle.materialise` replaces them
+#: when the case is written: ``__OUT__`` the absolute path of a folder *outside* the case's folder
+#: (holding ``canary.bin``, ``canary.usda``, the FIFOs ``fifo`` and ``fifo.usda``), ``__SELF__``
+#: the case file's own name.  The case's folder holds ``sub/`` (a directory), the FIFOs ``fifo``
+#: and ``fifo.usda``, ``link.bin`` / ``link.usda`` (symlinks to the canaries outside) and ``loop``
+#: (a symlink to itself).  Any of them opened is a bad outcome (the oracle watches both folders).
+OUT, SELF = "__OUT__", "__SELF__"
+
+#: Where a mutated reference points, by kind of target: {suffix} is ``.bin`` or ``.usda``.
+REF_TARGETS = (
+    OUT + "/canary{sfx}",            # an absolute path outside
+    "../outside/canary{sfx}",        # a ../ escape
+    "file://" + OUT + "/canary{sfx}",  # a file:// URI
+    "file:canary{sfx}",
+    OUT + "/fifo{fifo}",             # a FIFO outside
+    "fifo{fifo}",                    # a FIFO inside
+    "./fifo{fifo}",
+    "/dev/zero",
+    "/dev/urandom",
+    "/proc/self/mem",
+    "sub",                           # a directory
+    "sub/",
+    ".",
+    "link{sfx}",                     # a symlink out
+    "loop",                          # a symlink loop
+    "sub/../../outside/canary{sfx}",
+    SELF,                            # the file itself
+    "./" + SELF,
+    "missing{sfx}",
+    "//" + OUT + "/canary{sfx}",
+    "%2e%2e/outside/canary{sfx}",
+)
+
+
+def _ref_target(rng, usd):
+    t = _pick(rng, REF_TARGETS)
+    return t.format(sfx=".usda" if usd else ".bin", fifo=".usda" if usd else "")
+
+
+def _gltf_refs(doc, rng):
+    """Point a buffer's or an image's ``uri`` (a new image when there is none) at a target."""
+    if not isinstance(doc, dict):
+        raise NotApplicable
+    target = _ref_target(rng, usd=False)
+    bufs = doc.get("buffers") if isinstance(doc.get("buffers"), list) else []
+    if bufs and isinstance(bufs[0], dict) and rng.random() < 0.75:
+        i = int(rng.integers(len(bufs)))
+        if not isinstance(bufs[i], dict):
+            raise NotApplicable
+        bufs[i]["uri"] = target
+        return f"buffer {i} uri -> {target!r}"
+    imgs = doc.setdefault("images", []) if isinstance(doc.get("images", []), list) else None
+    if imgs is None:
+        raise NotApplicable
+    imgs.append({"uri": target})
+    return f"image {len(imgs) - 1} uri -> {target!r}"
+
+
+def gltf_refs(data, rng):
+    try:
+        doc = json.loads(data)
+    except ValueError:
+        raise NotApplicable from None
+    what = _gltf_refs(doc, rng)
+    return json.dumps(doc, indent=1, allow_nan=True).encode(), "glTF reference: " + what
+
+
+def glb_refs(data, rng):
+    doc, chunks = glb_split(data)
+    what = _gltf_refs(doc, rng)
+    chunks[0] = (_JSON, _json_bytes(doc))
+    return glb_join(chunks), "GLB reference: " + what
+
+
+_USD_ARCS = ("subLayers", "references", "payload", "clips", "inherits_ref", "variant_payload", "clip_manifest")
+_DEF = re.compile(rb'^([ \t]*)(?:def|over) +(?:\w+ +)?"[^"\n]*"[ \t]*(\(?)', re.M)
+
+
+def usda_refs(data, rng):
+    """Add a composition arc (sublayer, reference, payload, value clip, a variant's payload) whose
+    asset path points at a target (see :data:`REF_TARGETS`)."""
+    if not data.startswith(b"#usda"):
+        raise NotApplicable
+    target = _ref_target(rng, usd=True).encode()
+    arc = _pick(rng, _USD_ARCS)
+    if arc == "subLayers":
+        nl = data.find(b"\n")
+        head = data[nl + 1:].lstrip()
+        if head.startswith(b"("):
+            at = data.index(b"(", nl) + 1
+            data = data[:at] + b"\n    subLayers = [@" + target + b"@]\n" + data[at:]
+        else:
+            data = data[:nl + 1] + b"(\n    subLayers = [@" + target + b"@]\n)\n" + data[nl + 1:]
+        return data, f"USD subLayers -> {target.decode()!r}"
+    defs = list(_DEF.finditer(data))
+    if not defs:
+        raise NotApplicable
+    m = defs[int(rng.integers(len(defs)))]
+    meta = {
+        "references": b"prepend references = @" + target + b"@",
+        "inherits_ref": b"references = @" + target + b"@</root>",
+        "payload": b"prepend payload = @" + target + b"@",
+        "clips": (b'clips = {\n dictionary default = {\n asset[] assetPaths = [@' + target + b'@]\n'
+                  b' string primPath = "/root"\n double2[] active = [(0, 0)]\n double2[] times = [(0, 0)]\n }\n }'),
+        "clip_manifest": (b'clips = {\n dictionary default = {\n asset manifestAssetPath = @' + target + b'@\n'
+                          b' asset[] assetPaths = [@' + target + b'@]\n double2[] active = [(0, 0)]\n }\n }'),
+        "variant_payload": b'variantSets = "v"\n variants = {\n string v = "a"\n }',
+    }[arc]
+    if m.group(2):  # the prim already has metadata: add to it
+        at = m.end()
+        data = data[:at] + b"\n    " + meta + b"\n" + data[at:]
+    else:
+        at = m.end()
+        data = data[:at] + b" (\n    " + meta + b"\n)" + data[at:]
+    if arc == "variant_payload":  # the variant itself, in the prim's body
+        brace = data.find(b"{", at)
+        if brace < 0:
+            raise NotApplicable
+        body = (b'\n    variantSet "v" = {\n        "a" (\n            prepend payload = @' + target +
+                b'@\n        ) {\n        }\n    }\n')
+        data = data[:brace + 1] + body + data[brace + 1:]
+    return data, f"USD {arc} -> {target.decode()!r}"
+
+
 # ====================================================================== the table
 #: extension -> structure-aware mutators for it (byte and text ones apply on top)
 FORMAT_MUTATORS = {
-    ".glb": {"glb_json": glb_json, "glb_bin": glb_bin, "glb_chunks": glb_chunks},
-    ".gltf": {"gltf_json": gltf_json_mut, "gltf_buffers": gltf_buffers},
+    ".glb": {"glb_json": glb_json, "glb_bin": glb_bin, "glb_chunks": glb_chunks, "glb_refs": glb_refs},
+    ".gltf": {"gltf_json": gltf_json_mut, "gltf_buffers": gltf_buffers, "gltf_refs": gltf_refs},
     ".fbx": {"fbx_array": fbx_array, "fbx_array_header": fbx_array_header, "fbx_scalar": fbx_scalar,
              "fbx_nodes": fbx_nodes, "fbx_record": fbx_record},
-    ".usda": {"usda_tokens": usda_tokens, "usda_arrays": usda_arrays, "text_number": text_number,
+    ".usda": {"usda_tokens": usda_tokens, "usda_arrays": usda_arrays, "usda_refs": usda_refs, "text_number": text_number,
               "text_lines": text_lines, "text_brackets": text_brackets, "text_encoding": text_encoding},
     ".usdc": {"usdc_bootstrap": usdc_bootstrap, "usdc_toc": usdc_toc, "usdc_section": usdc_section},
     ".usdz": {"usdz_inner": usdz_inner},
@@ -1065,14 +1194,26 @@ def mutators_for(ext: str, data: bytes) -> dict:
     return table
 
 
-def mutate(data: bytes, ext: str, rng, structured: float = 0.7, stack: float = 0.2):
+#: Share of the cases of a format with a reference mutator (``*_refs``) that get one first.
+REFS_SHARE = 0.15
+
+
+def mutate(data: bytes, ext: str, rng, structured: float = 0.7, stack: float = 0.2, refs: float = REFS_SHARE):
     """Mutate ``data`` (a file of extension ``ext``); returns ``(bytes, [(mutator, what), ...])``.
 
-    A structure-aware mutator with probability ``structured`` (when the format has any),
-    else a byte-level one; with probability ``stack`` a second mutation on top.  Deterministic
-    for a given ``rng`` state.
+    With probability ``refs`` (when the format has a reference mutator) that one first; then a
+    structure-aware mutator with probability ``structured`` (when the format has any), else a
+    byte-level one; with probability ``stack`` a second mutation on top.  Deterministic for a
+    given ``rng`` state.
     """
     steps = []
+    ref = next((n for n in sorted(FORMAT_MUTATORS.get(ext, {})) if n.endswith("_refs")), None)
+    if ref and rng.random() < refs:
+        try:
+            data, what = FORMAT_MUTATORS[ext][ref](data, rng)
+            steps.append((ref, what))
+        except NotApplicable:
+            pass
     for _ in range(2 if rng.random() < stack else 1):
         fmt = mutators_for(ext, data)
         pool = fmt if fmt and rng.random() < structured else BYTE_MUTATORS

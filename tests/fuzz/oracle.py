@@ -17,6 +17,14 @@ The rules (issue 12; the contract's "one line, exit 1, nothing written"):
     makes it print ``failed call to posix_madvise``) are counted, not judged: the report on
     stdout is the interface.
 
+References (issue 26 item 7)
+    every case runs in its own folder, beside a folder *outside* it holding canary files and
+    FIFOs; the case's folder holds a directory, FIFOs, symlinks out and a symlink loop (see
+    :data:`tests.fuzz.mutators.REF_TARGETS`: the reference mutator points a file's references at
+    them).  Both folders are watched (Linux inotify, every process: the contained child and the
+    subprocess cases too): any of those files opened is a bad outcome, whatever the exit status;
+    so is any line of usd-core's on stderr (``validate`` included: its native stderr is judged).
+
 Cases run in-process through click's ``CliRunner`` (fast: no interpreter start per case) with
 warnings recorded and file descriptor 2 redirected to a file, so native output is seen too; a
 sample runs as a real ``python -m colossus`` subprocess, the path users take.
@@ -24,9 +32,11 @@ sample runs as a real ``python -m colossus`` subprocess, the path users take.
 
 from __future__ import annotations
 
+import ctypes
 import json
 import os
 import re
+import struct
 import shutil
 import subprocess
 import sys
@@ -37,7 +47,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from .mutators import mutate
+from .mutators import OUT, SELF, glb_join, glb_split, mutate, NotApplicable
 
 #: Longest acceptable error line (characters, not counting the input's path).
 MAX_MESSAGE = 300
@@ -80,6 +90,114 @@ def captured_fd2():
         tmp.close()
 
 
+# ------------------------------------------------------------------------------ references
+#: Files in the case's folder a reference may name but nothing may open (see mutators.REF_TARGETS).
+FORBIDDEN_INSIDE = ("fifo", "fifo.usda", "link.bin", "link.usda", "loop")
+
+
+def layout(workdir: str):
+    """The case's folder and the folder outside it, with the targets of the reference mutator:
+    returns ``(case_dir, outside_dir)``."""
+    case_dir, outside = os.path.join(workdir, "case"), os.path.join(workdir, "outside")
+    os.makedirs(os.path.join(case_dir, "sub"))
+    os.makedirs(outside)
+    with open(os.path.join(outside, "canary.bin"), "wb") as fh:
+        fh.write(b"\0" * 4096)
+    with open(os.path.join(outside, "canary.usda"), "w") as fh:
+        fh.write('#usda 1.0\n\ndef Xform "root"\n{\n}\n')
+    for d in (outside, case_dir):
+        for name in ("fifo", "fifo.usda"):
+            os.mkfifo(os.path.join(d, name))
+    os.symlink(os.path.join(outside, "canary.bin"), os.path.join(case_dir, "link.bin"))
+    os.symlink(os.path.join(outside, "canary.usda"), os.path.join(case_dir, "link.usda"))
+    os.symlink("loop", os.path.join(case_dir, "loop"))
+    return case_dir, outside
+
+
+def materialise(data: bytes, ext: str, outside: str, name: str) -> bytes:
+    """The case's bytes with the reference mutator's placeholders made real paths."""
+    if OUT.encode() not in data and SELF.encode() not in data:
+        return data
+
+    def sub(b):
+        return b.replace(OUT.encode(), outside.encode()).replace(SELF.encode(), name.encode())
+    if ext == ".glb":
+        try:
+            _, chunks = glb_split(data)
+            chunks[0] = (chunks[0][0], sub(chunks[0][1]).rstrip(b" "))
+            return glb_join(chunks)
+        except NotApplicable:
+            pass
+    return sub(data)
+
+
+_IN_ACCESS, _IN_OPEN, _IN_ISDIR = 0x1, 0x20, 0x40000000
+
+
+class OpenWatch:
+    """Files of ``folders`` that any process opens while the watch lasts (Linux inotify; on other
+    systems, or without inotify, :meth:`opened` is always empty)."""
+
+    def __init__(self, folders):
+        self.fd, self.wd = -1, {}
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            fd = libc.inotify_init1(os.O_NONBLOCK | os.O_CLOEXEC)
+        except (OSError, AttributeError):
+            return
+        if fd < 0:
+            return
+        self.fd, self._libc = fd, libc
+        for d in folders:
+            wd = libc.inotify_add_watch(fd, os.fsencode(d), _IN_OPEN | _IN_ACCESS)
+            if wd >= 0:
+                self.wd[wd] = d
+
+    def opened(self) -> list:
+        """``[(folder, name)]`` of the files opened or read so far (the folders themselves not)."""
+        out = []
+        if self.fd < 0:
+            return out
+        while True:
+            try:
+                buf = os.read(self.fd, 65536)
+            except BlockingIOError:
+                break
+            if not buf:
+                break
+            pos = 0
+            while pos + 16 <= len(buf):
+                wd, mask, _cookie, n = struct.unpack_from("iIII", buf, pos)
+                name = buf[pos + 16:pos + 16 + n].rstrip(b"\0").decode("utf-8", "replace")
+                pos += 16 + n
+                if name and not mask & _IN_ISDIR and (self.wd.get(wd), name) not in out:
+                    out.append((self.wd.get(wd), name))
+        return out
+
+    def close(self):
+        if self.fd >= 0:
+            os.close(self.fd)
+            self.fd = -1
+
+
+#: usd-core's diagnostics as they reach stderr (TF_WARN / TF_RUNTIME_ERROR / TF_CODING_ERROR text).
+_USD_LINE = re.compile(r"Warning: in \w+ at line|Error in '|_ReportErrors|pxrInternal|Coding Error|"
+                       r"Runtime Error|failed call to posix_madvise|^\s*(?:Warning|Error): in ")
+
+
+def usd_lines(text: str) -> list:
+    """The lines of ``text`` that are usd-core's own diagnostics."""
+    return [ln for ln in text.splitlines() if _USD_LINE.search(ln) and not ln.startswith("error: ")]
+
+
+def _judge_references(problems, watch, case_dir, where):
+    for folder, name in watch.opened():
+        if folder != case_dir:
+            problems.append(f"{where}: opened {name!r} outside the case's folder")
+        elif name in FORBIDDEN_INSIDE:
+            problems.append(f"{where}: opened {name!r} (a FIFO or a symlink out) in the case's folder")
+
+
 def _norm(text: str) -> str:
     """A message reduced to its kind: paths, numbers and quoted values removed."""
     text = re.sub(r"(/[^\s:'\"]+)+", "<path>", text)
@@ -109,13 +227,15 @@ def _subprocess(args, timeout):
     return p.returncode, p.stdout, p.stderr, None, [], ""
 
 
-def _common(problems, exc, warns, native, where):
+def _common(problems, exc, warns, native, where, stderr=""):
     if exc is not None:
         problems.append(f"{where}: exception escaped click: {type(exc).__name__}: {_norm(str(exc))}")
     for w in warns:
         problems.append(f"{where}: Python warning {_norm(w)}")
     if native.strip():
         problems.append(f"{where}: native stderr output: {_norm(native.strip().splitlines()[-1])}")
+    for ln in usd_lines(stderr)[:1] if stderr else ():
+        problems.append(f"{where}: a usd-core line on stderr: {_norm(ln)}")
 
 
 def _judge_error_line(problems, code, stderr, where, src=""):
@@ -133,7 +253,7 @@ def _judge_error_line(problems, code, stderr, where, src=""):
         problems.append(f"{where}: internal error {m.group(1)}: {_norm(line.split(m.group(1), 1)[1])}")
     if "out of memory" in line:  # our MemoryError mapping: an allocation escaped the readers' budget
         problems.append(f"{where}: out of memory (an allocation escaped the budget)")
-    if "Error in 'pxrInternal" in line or "Error in 'pxr" in line:
+    if "Error in 'pxrInternal" in line or "Error in 'pxr" in line or "pxrInternal_" in line:
         problems.append(f"{where}: usd-core's raw error text (function, source line) not reduced to its reason")
     if len(line) - line.count(src) * len(src) > MAX_MESSAGE:
         problems.append(f"{where}: message of {len(line)} characters")
@@ -170,7 +290,7 @@ def _run_import(case, src, workdir, timeout):
     else:
         code, stdout, stderr, exc, warns, native = _invoke(args)
         where = "import"
-    _common(problems, exc, warns, native, where)
+    _common(problems, exc, warns, native, where, stderr)
     if code == 0:
         if stderr.strip():
             problems.append(f"{where}: exit 0 with stderr output: {_norm(stderr.strip().splitlines()[-1])}")
@@ -192,14 +312,14 @@ def _run_import(case, src, workdir, timeout):
 
 
 def _run_validate(case, bad, workdir):
-    good = os.path.join(workdir, "good" + case["ext"])
+    good = os.path.join(os.path.dirname(bad), "good" + case["ext"])
     shutil.copyfile(case["seed"], good)
     code, stdout, stderr, exc, warns, native = _invoke(["validate", bad, good, "--format", "json"])
     problems = []
-    # usd-core's own diagnostics (TF_WARN, "failed call to posix_madvise") on a corrupt asset go
-    # to fd 2 from C++; the report on stdout is what counts, so they are noted, not judged
+    # usd-core's own diagnostics (TF_WARN, "failed call to posix_madvise") on a corrupt asset
+    # went to fd 2 from C++; since issue 26 item 4 nothing of usd-core's reaches stderr: judged
     case["noise"] = bool(native.strip())
-    _common(problems, exc, warns, "", "validate")
+    _common(problems, exc, warns, native, "validate", stderr)
     outcome = f"exit {code}"
     if code not in (0, 1, 2):
         problems.append(f"validate: exit status {code}: {_norm(stderr.strip()[-200:])}")
@@ -236,16 +356,22 @@ def run_case(case: dict, timeout: float = 60.0, keep: str | None = None, data: b
     else:
         steps = case.get("steps", [])
     workdir = tempfile.mkdtemp(prefix=f"fuzz{case['index']}-")
+    watch = None
     try:
         name = ("case" if case["kind"] == "import" else "bad") + case["ext"]
-        src = os.path.join(workdir, name)
+        case_dir, outside = layout(workdir)
+        src = os.path.join(case_dir, name)
         with open(src, "wb") as fh:
-            fh.write(data)
+            fh.write(materialise(data, case["ext"], outside, name))
+        watch = OpenWatch([case_dir, outside])
         if case["kind"] == "import":
             outcome, code, stderr, problems = _run_import(case, src, workdir, timeout)
         else:
             outcome, code, stderr, problems = _run_validate(case, src, workdir)
+        _judge_references(problems, watch, case_dir, case["kind"])
     finally:
+        if watch is not None:
+            watch.close()
         shutil.rmtree(workdir, ignore_errors=True)
     rec = {**case, "steps": steps, "outcome": outcome, "exit": code, "stderr": stderr[-1000:],
            "problems": problems, "seconds": round(time.perf_counter() - t0, 3)}

@@ -360,8 +360,10 @@ def test_contained_call_quiet_and_fallback(capfd, monkeypatch):
 def test_contained_child_deadlocked_at_the_fork_is_forked_again(monkeypatch):
     """Another thread holds a lock at the fork (as usd-core's background workers can): the child
     inherits it held by a thread it does not have and sleeps forever.  Without the stall watch
-    that is a timeout (a false "took too long" after READ_TIMEOUT seconds); with it the child is
-    killed after STALL_SECONDS asleep without CPU and forked again, once the lock is free."""
+    that is a timeout (a false "took too long" after READ_TIMEOUT seconds).  Serialised around
+    the fork (the lock passed as a guard: issue 26 item 6) the child never inherits it held, with
+    the watch off and STALL_SECONDS out of reach; the watch (for callers that cannot serialise)
+    kills a child asleep without CPU for STALL_SECONDS and forks it again, once the lock is free."""
     import threading
 
     from colossus.pipeline import isolation
@@ -379,7 +381,7 @@ def test_contained_child_deadlocked_at_the_fork_is_forked_again(monkeypatch):
             held.set()
             time.sleep(seconds)
 
-    def race(hold_s, timeout):
+    def race(hold_s, timeout, **kw):
         held = threading.Event()
         t = threading.Thread(target=hold, args=(hold_s, held))
         t.start()
@@ -387,7 +389,7 @@ def test_contained_child_deadlocked_at_the_fork_is_forked_again(monkeypatch):
         try:
             t0 = time.monotonic()
             try:
-                return contained(needs_the_lock, timeout=timeout), time.monotonic() - t0
+                return contained(needs_the_lock, timeout=timeout, **kw), time.monotonic() - t0
             except ChildFailed as e:
                 return e, time.monotonic() - t0
         finally:
@@ -397,11 +399,53 @@ def test_contained_child_deadlocked_at_the_fork_is_forked_again(monkeypatch):
     monkeypatch.setattr(isolation, "STALL_SECONDS", 1e9)  # no watch: the deadlock is real
     got, _ = race(0.3, timeout=2.0)
     assert isinstance(got, ChildFailed) and got.timed_out
+    # serialised: the fork waits for the holder (0.3 s), no watch, no re-fork
+    got, seconds = race(0.3, timeout=5.0, guards=[lock], watch=False)
+    assert got == 42 and seconds < 2, (got, seconds)
     monkeypatch.setattr(isolation, "STALL_SECONDS", 1.0)
     got, seconds = race(0.3, timeout=30.0)
     assert got == 42 and seconds < 10, (got, seconds)
     # a child that works (uses CPU) for longer than STALL_SECONDS is not taken for a deadlock
     assert contained(_spin, 2.5, timeout=30.0) > 0
+
+
+def test_validate_probes_fork_with_usd_core_serial(tmp_path, monkeypatch):
+    """Issue 26 item 6 with usd-core itself: ``validate --jobs 1`` probes crate assets in forked
+    children while usd-core is serial (no usd-core thread exists to hold a lock at the fork), so
+    the probes are not watched and need no re-fork: with STALL_SECONDS out of reach and a 20 s
+    probe timeout, 12 crate assets whose stages the parent opened and dropped in between (the
+    background frees that used to deadlock a child) all validate without a COL001."""
+    from pxr import Sdf, Work
+
+    from colossus.pipeline import isolation
+    from colossus.validators import parallel
+    if not isolation.available():
+        pytest.skip("needs os.fork")
+    monkeypatch.setattr(isolation, "STALL_SECONDS", 1e9)
+    monkeypatch.setattr(parallel, "PROBE_TIMEOUT", 20.0)
+    from colossus.pipeline.run import import_asset
+    base = tmp_path / "base.usda"
+    import_asset(SAMPLES / "limb.glb", base)
+    paths = []
+    for i in range(12):
+        p = tmp_path / f"a{i:02d}.usdc"
+        Sdf.Layer.FindOrOpen(str(base)).Export(str(p))
+        paths.append(str(p))
+    seen = []
+    probe = parallel.contained
+
+    def spy(fn, *a, **kw):
+        seen.append((Work.GetConcurrencyLimit(), kw.get("watch")))
+        return probe(fn, *a, **kw)
+    monkeypatch.setattr(parallel, "contained", spy)
+    limit = Work.GetConcurrencyLimit()
+    t0 = time.monotonic()
+    res = parallel.check_many(paths, jobs=1)
+    assert time.monotonic() - t0 < 60
+    assert seen == [(1, False)] * 12, seen
+    assert Work.GetConcurrencyLimit() == limit  # restored after the run
+    for r in res.reports:
+        assert not any(f.code == "COL001" for f in r.findings), r.findings
 
 
 def _spin(seconds):
@@ -423,6 +467,27 @@ def test_reader_isolation_can_be_switched_off(work, monkeypatch):
 
 
 # ---- fixed classes ---------------------------------------------------------------------------
+def test_glb_transform_singular_as_stored_is_one_line(work, run_import):
+    """Fuzz case 147 of campaign 12 (issue 26 item 7's run): a bufferView's byteStride set to 1
+    makes an animation's scale keys tiny but non-zero (check_read passes them); stored in half
+    precision they are 0 and the spheres stage met a singular matrix (an internal error after a
+    NumPy warning).  Now one line."""
+    from paths import CORPUS
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    from fuzz.mutators import _JSON, glb_join, glb_split
+    seed = CORPUS / "realworld" / "godot_platformer_player.glb"
+    if not seed.exists():
+        pytest.skip("the third-party corpus is not beside the repository")
+    doc, chunks = glb_split(seed.read_bytes())
+    doc["bufferViews"][255]["byteStride"] = 1
+    chunks[0] = (_JSON, json.dumps(doc, separators=(",", ":")).encode())
+    src = work / "case.glb"
+    src.write_bytes(glb_join(chunks))
+    proc = run_import(src, work / "out.usda")
+    assert_clean_failure(proc, work / "out.usda", "not invertible as stored")
+
+
 def test_glb_zero_scale_key_is_one_line(work, run_import):
     """Fuzz class 'internal error (LinAlgError: Singular matrix)' (.glb): a leaf joint animated to
     scale 0 reached np.linalg.inv in the spheres stage; now rejected at the read."""
@@ -793,3 +858,18 @@ def test_fbx_checks_on_a_cut_curve_array_fail_closed(work, run_import):
     r = run_import(src, out)
     assert "internal error" not in r.stderr, r.stderr
     assert r.returncode in (0, 1), r.stderr
+
+
+def test_fbx_cut_curve_attribute_array_is_not_an_internal_error():
+    """Fuzz case 48 of campaign 12 (main's case plan, found while checking issue 26 item 7's
+    campaign time): a KeyAttrDataFloat array cut to 3 values (not a multiple of a key's 4) made
+    the curve-interpolation check's reshape fail, an internal error.  Whole keys are kept."""
+    from colossus.pipeline.readers.fbx_checks import _per_key
+
+    class Node:
+        def value(self, name):
+            return None
+    a = _per_key(Node(), [0.0, 1.0, 2.0], 2, width=4)
+    assert a.shape == (2, 4)
+    b = _per_key(Node(), list(range(9)), 3, width=4)
+    assert b.shape == (3, 4) and (b[2] == b[1]).all()

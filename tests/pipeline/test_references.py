@@ -210,3 +210,20 @@ def test_nothing_of_usd_cores_reaches_stderr(jobs):
     assert p.returncode == 1 and p.stderr == "", p.stderr
     (rep,) = json.loads(p.stdout)["assets"]
     assert "COL001" in [f["code"] for f in rep["findings"]]
+
+
+@pytest.mark.parametrize("clip", ["/proc/self/mem", "fifo.usda", "../outside/x.usda"])
+def test_usd_source_value_clips_are_checked_not_an_internal_error(tmp_path, outside, clip):
+    """Fuzz campaign 13 (the reference mutator), case 32: a USD source whose prim has value
+    clips was an internal error (UnboundLocalError in layer_references); now each clip asset path
+    is checked like any other reference."""
+    (case := tmp_path / "case").mkdir()
+    os.mkfifo(case / "fifo.usda")
+    text = (SAMPLES / "limb.usda").read_text()
+    text = text.replace('def Xform "root" (', 'def Xform "root" (\n    clips = {\n        dictionary default = {\n'
+                        f'            asset[] assetPaths = [@{clip}@]\n            string primPath = "/root"\n'
+                        '            double2[] active = [(0, 0)]\n        }\n    }', 1)
+    src = case / "src.usda"
+    src.write_text(text)
+    out = tmp_path / "o.usda"
+    assert_refused(run("import", src, "-o", out), out, repr(clip))
