@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .runtime import _median_time as _median  # one timing loop for every runtime row
+
 #: (label, path under the corpus).  The quick run uses the first one only.
 CHARACTERS = (
     ("RiggedFigure", "khronos/RiggedFigure.gltf"),
@@ -350,17 +352,6 @@ def format_validate_rows(rows) -> str:
                   f"    whole proof (read {_s(r['read_s'])} + sampled + continuous) = {r['whole_vs_lbs']:6.2f}x "
                   "the speed of SkinPointsLBS"]
     return "\n".join(lines)
-
-
-def _median(fn, repeat, warm=3):
-    for _ in range(warm):
-        fn()
-    ts = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return float(np.median(ts))
 
 
 def runtime_row(ch: Character, repeat=50) -> dict:
