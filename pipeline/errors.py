@@ -11,6 +11,10 @@ from colossus.runtime.errors import ColossusError, one_line
 __all__ = ["ColossusError", "one_line", "InputError", "OutputError", "UsageError"]
 
 
+#: Longest problem text of an :class:`InputError` (the command line adds "error: " and ": ").
+PROBLEM_LIMIT = 300 - len("error: ") - len(": ")
+
+
 class InputError(ColossusError):
     """The input file is unusable (unreadable, corrupt, unsupported, semantically invalid).
 
@@ -19,7 +23,9 @@ class InputError(ColossusError):
 
     def __init__(self, path, problem: str):
         self.path = str(path) if path is not None else None
-        self.problem = one_line(problem, limit=300)  # force one line, of readable length
+        # one line, of readable length: "error: <file>: <problem>" is at most 300 characters
+        # besides the file's path
+        self.problem = one_line(problem, limit=PROBLEM_LIMIT)
         super().__init__(f"{self.path}: {self.problem}" if self.path else self.problem)
 
 
