@@ -445,9 +445,14 @@ def _attempt(fn, args, kwargs, path, memory, deadline, timeout, watch, guards=()
 def _read_in_child(path, meshes, fps, limit_mib, allow_outside=False):
     from colossus.runtime.references import allowing_outside
 
+    import numpy as np
+
     from .readers import read
     try:
-        with allowing_outside(allow_outside):
+        # a hostile file's NaN, inf and overflowing values make numpy warn inside the readers;
+        # the readers and check_read refuse such values explicitly, in one line, so numpy's own
+        # warnings (which would be a second, Python-level line) are not raised while reading
+        with allowing_outside(allow_outside), np.errstate(all="ignore"):
             return read(path, meshes=meshes, fps=fps)
     except MemoryError:
         raise InputError(path, f"reading it needs more memory than the {limit_mib:.0f} MiB a file of its size "

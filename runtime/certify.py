@@ -298,52 +298,55 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     s_hi = np.empty((I, Jn))
     s_lo = np.empty((I, Jn))
     iso = np.empty((I, Jn), bool)
-    for j in rig.topo:
-        p = rig.parents[j]
-        s_hi[:, j] = fac["fw"][:, j, 0] * (s_hi[:, p] if p >= 0 else 1.0)
-        s_lo[:, j] = (s_lo[:, p] if p >= 0 else 1.0) / fac["iv"][:, j, 0]
-        iso[:, j] = fac["iso"][:, j] & (iso[:, p] if p >= 0 else True)
-    wl = rig.world[:3, :3]
-    s_hi *= _norm2(wl)
-    s_lo *= _sigma_min(wl)
-    J = rig.part_joint
-    r = rig.part_radii
-    # where every factor of J's root path (and the world transform) is a rotation times a uniform
-    # scale at every time, N_J is a similarity: mu(N_J) = ||L(N_J)|| at each time, ratio 1
-    sw = np.linalg.svd(wl, compute_uv=False)
-    iso &= bool(sw[0] - sw[-1] <= 1e-12 * sw[0])
-    ratio = np.where(iso, 1.0, s_lo / s_hi)
-    if rho is None:
-        rho = (r[None] * (1.0 + tol_rel) * ratio[:, J] * (1 - 1e-12) + tol_abs / s_hi[:, J])
-    else:
-        # radii given (the spheres stage's targets): held as the default holds the spheres' own
-        # radii, times the interval's scale ratio, so what passes here passes the validator
-        rho = np.asarray(rho, dtype=np.float64) * ratio[:, J] * (1 - 1e-12)
-    rho = np.broadcast_to(np.asarray(rho, dtype=np.float64), (I, P)).copy()
-    # level A1: the continuous test K
-    kc = np.maximum(e0, e1) + delta + pert + lam * bd.pj_radius[None]
-    starts = bd.pj_offsets[:-1]
-    nonempty = np.diff(bd.pj_offsets) > 0
-    K1 = np.full((I, P), np.inf)
-    if M:
-        K1[:, nonempty] = np.maximum.reduceat(kc, starts[nonempty], axis=1)
-    with np.errstate(invalid="ignore"):
-        K1 = np.where(nonempty[None], bd.part_wabs[None] * K1, 0.0)
-    K1 = K1 \
-        + bd.part_wdev[None] * np.linalg.norm(bd.part_centers, axis=1)[None]  # an empty part holds trivially
-    # level A2: chords of the sampled bounds
-    own = bd.pj_joint == J[pair_part] if M else np.zeros(0, bool)
-    dl = np.where(own[None], 0.0, delta + pert)
-    dev_max = np.zeros((I, P))
-    dev_sum = np.zeros((I, P))
-    if M:
-        dev_max[:, nonempty] = np.maximum.reduceat(dl, starts[nonempty], axis=1)
-        dev_sum[:, nonempty] = np.add.reduceat(dl * bd.pj_wmax[None], starts[nonempty], axis=1)
-    dev = np.minimum(bd.part_wabs[None] * dev_max, dev_sum)
-    fb = np.asarray(frame_bound, dtype=np.float64)
-    fb = np.maximum(fb[:-1], fb[1:])
-    if frame_bound_space == "stage":
-        fb = fb / s_lo[:, J]
+    # a degenerate interval (a scale through zero in a corrupt asset) gives an infinite or NaN
+    # bound here: never certified (it compares false), so no warning is worth raising
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for j in rig.topo:
+            p = rig.parents[j]
+            s_hi[:, j] = fac["fw"][:, j, 0] * (s_hi[:, p] if p >= 0 else 1.0)
+            s_lo[:, j] = (s_lo[:, p] if p >= 0 else 1.0) / fac["iv"][:, j, 0]
+            iso[:, j] = fac["iso"][:, j] & (iso[:, p] if p >= 0 else True)
+        wl = rig.world[:3, :3]
+        s_hi *= _norm2(wl)
+        s_lo *= _sigma_min(wl)
+        J = rig.part_joint
+        r = rig.part_radii
+        # where every factor of J's root path (and the world transform) is a rotation times a uniform
+        # scale at every time, N_J is a similarity: mu(N_J) = ||L(N_J)|| at each time, ratio 1
+        sw = np.linalg.svd(wl, compute_uv=False)
+        iso &= bool(sw[0] - sw[-1] <= 1e-12 * sw[0])
+        ratio = np.where(iso, 1.0, s_lo / s_hi)
+        if rho is None:
+            rho = (r[None] * (1.0 + tol_rel) * ratio[:, J] * (1 - 1e-12) + tol_abs / s_hi[:, J])
+        else:
+            # radii given (the spheres stage's targets): held as the default holds the spheres' own
+            # radii, times the interval's scale ratio, so what passes here passes the validator
+            rho = np.asarray(rho, dtype=np.float64) * ratio[:, J] * (1 - 1e-12)
+        rho = np.broadcast_to(np.asarray(rho, dtype=np.float64), (I, P)).copy()
+        # level A1: the continuous test K
+        kc = np.maximum(e0, e1) + delta + pert + lam * bd.pj_radius[None]
+        starts = bd.pj_offsets[:-1]
+        nonempty = np.diff(bd.pj_offsets) > 0
+        K1 = np.full((I, P), np.inf)
+        if M:
+            K1[:, nonempty] = np.maximum.reduceat(kc, starts[nonempty], axis=1)
+        with np.errstate(invalid="ignore"):
+            K1 = np.where(nonempty[None], bd.part_wabs[None] * K1, 0.0)
+        K1 = K1 \
+            + bd.part_wdev[None] * np.linalg.norm(bd.part_centers, axis=1)[None]  # an empty part holds trivially
+        # level A2: chords of the sampled bounds
+        own = bd.pj_joint == J[pair_part] if M else np.zeros(0, bool)
+        dl = np.where(own[None], 0.0, delta + pert)
+        dev_max = np.zeros((I, P))
+        dev_sum = np.zeros((I, P))
+        if M:
+            dev_max[:, nonempty] = np.maximum.reduceat(dl, starts[nonempty], axis=1)
+            dev_sum[:, nonempty] = np.add.reduceat(dl * bd.pj_wmax[None], starts[nonempty], axis=1)
+        dev = np.minimum(bd.part_wabs[None] * dev_max, dev_sum)
+        fb = np.asarray(frame_bound, dtype=np.float64)
+        fb = np.maximum(fb[:-1], fb[1:])
+        if frame_bound_space == "stage":
+            fb = fb / s_lo[:, J]
     U = np.minimum(K1, fb + dev)
     ok = np.asarray(frame_ok, dtype=bool)
     ends_ok = ok[:-1] & ok[1:]

@@ -212,9 +212,10 @@ def prove(asset, subframes: int = 0, chunk_frames: int | None = None, clips=None
             exact = s.tier == 2
             proof.skinned_vertex_frames += int((exact * np.diff(poff)[None]).sum())
             wr = s.spheres[..., 3]
-            scale = wr / np.where(radii > 0, radii, 1.0)[None]
-            proof.tight_hi = np.maximum(proof.tight_hi, np.max(s.bound / scale, axis=0))
-            with np.errstate(invalid="ignore"):
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # a corrupt asset's 0 / inf radii
+                scale = wr / np.where(radii > 0, radii, 1.0)[None]
+                proof.tight_hi = np.maximum(proof.tight_hi, np.max(s.bound / scale, axis=0))
+            with np.errstate(invalid="ignore", divide="ignore"):
                 proof.tight_lo = np.maximum(proof.tight_lo, np.nanmax(np.where(exact, s.dist / scale, 0.0), axis=0))
                 excess = np.where(exact, s.dist - wr, -np.inf)
             fail = excess > tolerance + tol.CONTAIN_RADIUS * wr
@@ -225,7 +226,8 @@ def prove(asset, subframes: int = 0, chunk_frames: int | None = None, clips=None
             for p in range(P):
                 r, i = res[p], worst[p]
                 if excess[i, p] > r.excess:
-                    r.excess, r.fraction = float(excess[i, p]), float(excess[i, p] / wr[i, p])
+                    with np.errstate(invalid="ignore", divide="ignore"):
+                        r.excess, r.fraction = float(excess[i, p]), float(excess[i, p] / wr[i, p])
                     r.time, r.frame, r.vertex = float(t[i]), int(fidx[lo + i]), int(s.vertex[i, p])
                 nf = int(fail[:, p].sum())
                 if nf:
@@ -304,8 +306,9 @@ def tightest(asset, proof: Proof, slack_ratio: float) -> np.ndarray:
             for lo in range(0, len(times), tol.CHUNK_FRAMES):
                 skel = asset.skel_transforms(asset.anim_local(clip, times[lo:lo + tol.CHUNK_FRAMES]))
                 s = C.sampled(rig, skel, 0.0, 0.0, exact=np.broadcast_to(exact, (len(skel), len(r))))
-                scale = s.spheres[..., 3] / np.where(r > 0, r, 1.0)[None]
-                out[need] = np.maximum(out[need], np.max(s.dist[:, need] / scale[:, need], axis=0))
+                with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                    scale = s.spheres[..., 3] / np.where(r > 0, r, 1.0)[None]
+                    out[need] = np.maximum(out[need], np.max(s.dist[:, need] / scale[:, need], axis=0))
     proof._tightest = out
     return out
 

@@ -293,7 +293,11 @@ def _node_matrix(n) -> np.ndarray:
     s = np.array(n.get("scale", [1, 1, 1]), dtype=np.float64)
     if t.shape != (3,) or r.shape != (4,) or s.shape != (3,):
         raise ValueError("translation/rotation/scale have the wrong length")
-    nr = np.linalg.norm(r)
+    with np.errstate(over="ignore", invalid="ignore"):
+        nr = np.linalg.norm(r)
+    if not np.isfinite(nr):  # a huge but finite quaternion: scaled first, its norm would overflow
+        big = float(np.abs(r).max())
+        r, nr = (r / big, np.linalg.norm(r / big)) if np.isfinite(big) and big > 0 else (r, 0.0)
     return compose_trs(t, r / nr if nr > 0 else np.array([0, 0, 0, 1.0]), s)
 
 
@@ -482,7 +486,8 @@ def _read_scene(path, budget: AllocationBudget):
                 raise InputError(path, f"{what}: {len(t)} key times but {len(v)} values")
             if p == "r":
                 vals = v[:, 1] if interp == "CUBICSPLINE" else v
-                nrm = np.linalg.norm(vals, axis=-1)
+                with np.errstate(over="ignore", invalid="ignore"):  # a huge quaternion: refused just below
+                    nrm = np.linalg.norm(vals, axis=-1)
                 if np.any(nrm < 1e-12):
                     raise InputError(path, f"{what}: a zero rotation quaternion")
                 if interp != "CUBICSPLINE":
