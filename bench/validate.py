@@ -61,9 +61,9 @@ def synthetic_rig(n=20000, b=40, k=4, frames=500, seed=0):
 
 
 def rig_of(r, radii=None):
-    """The synthetic rig as :class:`runtime.certify.Rig` and its clip as ``ClipData`` (the local
+    """The synthetic rig as :class:`runtime.certify.Rig` and its clip as ``schema.Clip`` (the local
     transforms' rotations about Z as quaternions, translations, unit scales)."""
-    from colossus.runtime.asset import ClipData
+    from colossus.runtime.schema import Clip
     from colossus.runtime.certify import Rig
 
     b = len(r["bind"])
@@ -79,7 +79,7 @@ def rig_of(r, radii=None):
     t = np.zeros((F, b, 3))
     t[:, 1:, 1] = 1.0
     times = np.arange(F, dtype=np.float64)
-    clip = ClipData("bend", "/bend", times, t, times, q.astype(np.float32).astype(np.float64), times,
+    clip = Clip("bend", "/bend", times, t, times, q.astype(np.float32).astype(np.float64), times,
                     np.ones((F, b, 3)), np.arange(b), times)
     return rig, clip
 

@@ -444,6 +444,3 @@ def _read(path):
         stage=stage if l2w is None else None,
     ), stage
 
-
-#: The clip record's former name (one record now: :class:`runtime.schema.Clip`).
-ClipData = Clip

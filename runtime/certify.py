@@ -8,7 +8,7 @@ in :mod:`runtime.kernels.bounds` and :mod:`runtime.kernels.skin`; the bounds and
 arguments are written in those modules' docstrings and in :func:`continuous` below.
 
 Matrices are column-vector float64 (``p' = M @ p``).  ``world`` is the skeleton prim's
-local-to-world transform (stage space); a clip is a :class:`runtime.asset.ClipData`.
+local-to-world transform (stage space); a clip is a :class:`runtime.schema.Clip`.
 """
 
 from __future__ import annotations
@@ -272,7 +272,7 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
 
     Parameters
     ----------
-    rig : Rig; clip : ClipData; times : (F,) the clip's samples
+    rig : Rig; clip : schema.Clip; times : (F,) the clip's samples
     frame_bound : (F, P) upper bounds of the farthest vertex at the samples (stage space, or the
         part joint's space with ``frame_bound_space="joint"``); frame_ok : (F, P) bool the
         sampled verdicts (intervals next to a failing sample are not checked: status 5)

@@ -23,7 +23,8 @@ import math
 
 import numpy as np
 
-from .asset import ClipData, ColliderData, read_collider, read_collider_stage
+from .asset import ColliderData, read_collider, read_collider_stage
+from .schema import Clip
 from .backends import get_backend
 from .kernels import bounds as B
 from .kernels import pose as PK
@@ -389,7 +390,7 @@ class Collider:
                     alias.setdefault(a, []).append(c)
         self._aliases = {a: cs[0] for a, cs in alias.items() if len(cs) == 1}
         A0 = np.zeros((1, 0, 3))
-        self._rest = ClipData("", "", np.zeros(1), A0, np.zeros(1), np.zeros((1, 0, 4)),
+        self._rest = Clip("", "", np.zeros(1), A0, np.zeros(1), np.zeros((1, 0, 4)),
                               np.zeros(1), A0, np.zeros(0, dtype=np.int64), np.zeros(0))
 
     @property

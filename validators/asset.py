@@ -526,7 +526,7 @@ class LoadedAsset:
         return runtime_asset.blend_shapes(self.mesh) if self.mesh is not None else ""
 
     def clip_data(self, clip: Clip):
-        """The clip's raw samples as :class:`runtime.asset.ClipData` (what UsdSkel interpolates
+        """The clip's raw samples as :class:`runtime.schema.Clip` (what UsdSkel interpolates
         between frames); raises :class:`runtime.errors.ColliderError` when they are malformed."""
         cache = self.__dict__.setdefault("_clip_data", {})
         if clip.name not in cache:

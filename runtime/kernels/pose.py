@@ -200,7 +200,7 @@ LOCALS_KERNEL_MIN = 4096
 
 
 def locals_at(clip, times, rest_local, trs=False, compiled=None):
-    """(T, J, 4, 4) float64 joint-local transforms of ``clip`` (a :class:`runtime.asset.ClipData`)
+    """(T, J, 4, 4) float64 joint-local transforms of ``clip`` (a :class:`runtime.schema.Clip`)
     at time codes ``times`` (T,), interpolated as UsdSkel does; with ``trs=True`` also the
     animated joints' translations (T, A, 3), rotations (T, A, 4) (x, y, z, w) and scales
     (T, A, 3).  ``compiled``: force the kernel (True) or the numpy path (False, the same

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from references import naive
 from colossus.runtime import certify as C
-from colossus.runtime.asset import ClipData
+from colossus.runtime.schema import Clip
 from colossus.runtime.kernels import bounds as B
 from colossus.runtime.kernels import interval as IV
 from colossus.runtime.kernels import pose as PK
@@ -105,7 +105,7 @@ def test_interpolation_matches_usdskel_shortest_arc(compiled):
             q1 = -(q0 + 1e-4 * rng.normal(size=4))  # the nearly parallel (linear) branch
             q1 /= np.linalg.norm(q1)
         stage, cache, query = _usd_clip(q0, q1)
-        clip = ClipData("A", "/A", np.array([0.0, 1.0]), np.array([[[0, 0, 0]], [[1, 2, 3]]], float),
+        clip = Clip("A", "/A", np.array([0.0, 1.0]), np.array([[[0, 0, 0]], [[1, 2, 3]]], float),
                         np.array([0.0, 1.0]), np.array([[q0], [q1]]).astype(np.float32).astype(float),
                         np.array([0.0, 1.0]), np.array([[[1, 1, 1]], [[2, 1, 0.5]]], float),
                         np.array([0]), np.array([0.0, 1.0]))
@@ -132,7 +132,7 @@ def test_locals_at_numpy_path_equals_the_kernel():
     vr[1, 0] = -(vr[0, 0] + 1e-4)  # nearly parallel, opposite sign
     vr = vr.astype(np.float32).astype(float)
     vs = rng.uniform(0.7, 1.3, (2, A, 3)).astype(np.float16).astype(float)
-    clip = ClipData("c", "/c", tt, vt, tr, vr, ts, vs, np.array([0, 2, 3, 5, 6]), tt)
+    clip = Clip("c", "/c", tt, vt, tr, vr, ts, vs, np.array([0, 2, 3, 5, 6]), tt)
     rest = naive.trs(rng.normal(size=(J, 3)), Rotation.random(J, random_state=3).as_quat(), np.ones((J, 3)))
     times = np.array([-1.0, 0, 0.5, 1, 1.7, 2, 3.3, 4, 4.5, 6, 6.9, 7, 9])
     a = PK.locals_at(clip, times, rest, trs=True, compiled=True)
@@ -226,7 +226,7 @@ def random_rig(rng, J=6, n=400, F=6, angle=0.8, scale=False, tight=True):
     t = rest_t[None] + 0.2 * rng.normal(size=(F, J, 3))
     # animated uniform scales (non-uniform ones make the certificate conservative: see continuous())
     s = np.ones((F, J, 3)) if not scale else np.repeat(rng.uniform(0.8, 1.25, size=(F, J, 1)), 3, 2).astype(np.float16).astype(float)
-    clip = ClipData("c", "/c", times, t, times, q.astype(np.float32).astype(float), times, s, np.arange(J), times)
+    clip = Clip("c", "/c", times, t, times, q.astype(np.float32).astype(float), times, s, np.arange(J), times)
     skel = naive.compose(naive.trs(t, clip.vr, s), parents)
     y = naive.naive_lbs(pts, ji, jw, skel @ np.linalg.inv(bind))
     centers = np.zeros((J, 3))
@@ -318,7 +318,7 @@ def test_a_vertex_leaving_only_between_samples_is_caught_with_its_interval():
     jw = np.c_[np.ones(11), np.zeros(11)].astype(np.float32)
     qz = Rotation.from_rotvec([[0, 0, 0.9], [0, 0, -0.9]]).as_quat()
     times = np.array([0.0, 1.0])
-    clip = ClipData("swing", "/swing", times, np.tile([[[0, 0, 0], [0, 1, 0]]], (2, 1, 1)).astype(float), times,
+    clip = Clip("swing", "/swing", times, np.tile([[[0, 0, 0], [0, 1, 0]]], (2, 1, 1)).astype(float), times,
                     np.stack([np.tile([0, 0, 0, 1.0], (2, 1)), np.tile([0, 0, 0, 1.0], (2, 1))], 0), times,
                     np.ones((2, 2, 3)), np.array([0, 1]), times)
     clip.vr[:, 1] = qz
