@@ -12,6 +12,7 @@ import os
 from ..errors import InputError
 from .assimp_reader import read_assimp
 from .gltf_reader import read_gltf
+from .ufbx_reader import available as _ufbx_available, read_ufbx
 from .usd_reader import read_usd
 
 #: Extensions assimp 5.x/6.x imports (https://assimp-docs.readthedocs.io, "Importer formats").
@@ -29,6 +30,11 @@ USD_EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz")
 READERS = {ext: read_assimp for ext in ASSIMP_EXTENSIONS}
 READERS.update({ext: read_usd for ext in USD_EXTENSIONS})
 READERS.update({".glb": read_gltf, ".gltf": read_gltf})  # read from the spec: samplers, morph targets, skins
+# FBX as the authoring tools evaluate it (inherit types, pivots, geometric transforms, transform_skin)
+# when the ufbx binding is installed (the `pipeline` extra); assimp otherwise, or when
+# COLOSSUS_FBX_READER=assimp asks for it (to compare the two).
+if os.environ.get("COLOSSUS_FBX_READER", "ufbx") != "assimp" and _ufbx_available():
+    READERS[".fbx"] = read_ufbx
 
 
 def reader_for(path):

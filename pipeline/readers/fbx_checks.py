@@ -154,10 +154,11 @@ def _geometric(p: dict) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------ the checks
-def check(doc: Document | None, mesh: SkinnedMesh, scene=None) -> list:
+def check(doc: Document | None, mesh: SkinnedMesh, scene=None, only=None) -> list:
     """The :mod:`pipeline.notcarried` records of an FBX file read through assimp (see the module
     docstring).  ``mesh`` is the reader's result (source space), ``scene`` the
-    :class:`~pipeline.readers.scene.Scene` it was built from (for the mesh nodes' motion)."""
+    :class:`~pipeline.readers.scene.Scene` it was built from (for the mesh nodes' motion);
+    ``only`` names the checks to run (default all of them: the assimp path)."""
     if doc is None:
         return []
     try:
@@ -168,6 +169,8 @@ def check(doc: Document | None, mesh: SkinnedMesh, scene=None) -> list:
     out = []
     for fn in (_skinning_type, _inherit_type, _transform_skin, _geometric_transform, _instanced_skin,
                _constraints, _curve_interpolation):
+        if only is not None and fn.__name__.strip("_") not in only:
+            continue
         try:
             out += fn(ctx)
         except MALFORMED as e:  # fail closed: what could not be checked is said, never a crash
@@ -179,6 +182,11 @@ def check(doc: Document | None, mesh: SkinnedMesh, scene=None) -> list:
 #: values of the wrong type or size).
 MALFORMED = (ValueError, TypeError, IndexError, KeyError, OverflowError, ZeroDivisionError,
               AttributeError, np.linalg.LinAlgError)
+
+
+#: The checks that still apply to the ufbx reader, which evaluates inherit types, pivots,
+#: geometric transforms and every curve at every frame itself (:mod:`.ufbx_reader`).
+UFBX_CHECKS = ("skinning_type", "constraints")
 
 
 def unchecked(what: str, e: BaseException):

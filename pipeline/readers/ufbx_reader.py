@@ -1,0 +1,496 @@
+"""FBX through **ufbx**, evaluated as the authoring tools evaluate it.
+
+Why ufbx and not assimp for FBX: assimp composes every FBX model as ``RSrs`` and ignores inherit
+types, pivots' full semantics, geometric transforms in skin binding and ``transform_skin``; ufbx
+(a single-file C loader, https://github.com/ufbx/ufbx, MIT / public domain) evaluates all of them
+and is tested against Maya's, 3ds Max's and MotionBuilder's own deformed meshes.  The registry's
+``ufbx`` wheel (0.0.5, by ufbx's author) is the binding; its two known reference-counting bugs are
+worked around in :func:`_safe` (a deliberate, bounded leak of element wrappers) and by never using
+its buffer protocol (arrays are copied out by iteration).  The reader runs in the contained child
+(:mod:`pipeline.isolation`) like every reader, so a crash of the binding is one error line.
+
+What is read and how
+--------------------
+* **Transforms**: every model's world transform as ufbx evaluates it (inherit types RrSs / RSrs /
+  Rrs, pre/post rotation, rotation and scaling pivots and offsets, rotation order) at rest and at
+  every frame of every animation stack on the file's own frame grid (``frames_per_second``).  The
+  node graph's local transforms are ``inv(parent world) @ world``; they go to the node-graph
+  builder (:mod:`.scene.build`) as translation / rotation / scale keys at those frames.  Where a
+  local transform has shear (an RrSs child under a non-uniformly scaled parent), the keys cannot
+  hold it: the difference is measured (below).
+* **Skins**: a cluster's ``geometry_to_bone`` (mesh geometry space, geometric transform
+  included, to bone space at bind time) is the joint's inverse bind; a skinned point is
+  ``sum_j w_j W_j(t) @ geometry_to_bone_j @ p`` exactly as ufbx and the FBX SDK skin it.
+* **Maya's ``transform_skin``**: Maya moves a skinned mesh by its node's change since binding,
+  ``C(t) = N(t) @ inv(N_bind)`` (``N``: the mesh node's world transform; ``N_bind`` from the
+  cluster's bind-time ``Transform``).  For a file whose original application is Maya, with one
+  skinned mesh node and no rigid mesh under a bone, ``C(t)`` is folded into every node's world
+  transform (``sum_j w_j C W_j G_j p = C sum_j w_j W_j G_j p`` since the weights sum to one).
+  Elsewhere a ``C(t)`` that is not the identity is not carried (``fbx_transform_skin``, bounded).
+* **Axes and units**: a right-handed Y-up or Z-up file keeps its axes (``up_axis``); any other
+  axis system is converted by ufbx to Y-up at the root.  ``meters_per_unit`` is the file's
+  ``UnitScaleFactor`` (ufbx's ``unit_meters``).
+* **Geometry**: control points; polygons triangulated by ear clipping in their best-fit plane
+  (convex polygons as fans).
+
+Fail closed
+-----------
+:func:`read_ufbx` checks its own result against the exact formula above at the rest pose and up
+to :data:`CHECK_FRAMES` frames of every clip: the largest vertex difference is one
+``fbx_evaluation`` record when it exceeds :data:`EVAL_TOLERANCE` x the model size.  What ufbx
+evaluates but the collider cannot carry yet (dual-quaternion or blended skinning, blend shapes,
+constraints) is named by :mod:`.fbx_checks` with its bound, as on the assimp path; more than one
+instance of a skinned mesh is ``fbx_instanced_skin`` (the first instance is taken).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .. import notcarried
+from ..errors import InputError
+from ..xforms import compose_trs, decompose_trs
+from . import fbx_checks, fbx_doc
+from .common import AllocationBudget, check_finite, check_input_file
+from .scene import Animation, Channel, Scene, SceneMesh, Skin
+from .scene.build import build
+
+#: Frames of each clip (evenly spread, ends included) at which the result is checked against
+#: ufbx's evaluation, besides the rest pose.
+CHECK_FRAMES = 16
+#: A difference from ufbx's evaluation larger than this (x the model size) is not carried.
+EVAL_TOLERANCE = 1e-6
+#: The oldest FBX version ufbx reads (FBX 3.0).
+OLDEST_READ = 3000
+
+
+def available() -> bool:
+    """True when the ufbx binding imports."""
+    try:
+        import ufbx  # noqa: F401
+    except Exception:  # noqa: BLE001 - any failure to import means: use the assimp path
+        return False
+    return True
+
+
+def _safe(x):
+    """Work around ufbx 0.0.5's element lists, which hand out their cached wrappers without a new
+    reference (each access would free one): take one reference per access, never released."""
+    import ctypes
+
+    import ufbx
+    if isinstance(x, ufbx.Element):
+        ctypes.pythonapi.Py_IncRef(ctypes.py_object(x))
+    return x
+
+
+def _items(lst) -> list:
+    return [_safe(x) for x in lst]
+
+
+def _m44(m) -> np.ndarray:
+    """ufbx Matrix (four column vectors of an affine 3x4) -> 4x4 float64, column-vector convention."""
+    out = np.eye(4)
+    out[:3, :] = np.asarray(m, dtype=np.float64).reshape(4, 3).T
+    return out
+
+
+def _vec3s(lst) -> np.ndarray:
+    return np.array([tuple(v) for v in lst], dtype=np.float64).reshape(-1, 3)
+
+
+def _u32s(lst) -> np.ndarray:
+    return np.fromiter(iter(lst), dtype=np.int64, count=len(lst))
+
+
+def _reals(lst) -> np.ndarray:
+    return np.fromiter(iter(lst), dtype=np.float64, count=len(lst))
+
+
+def _triangulate(corners: np.ndarray, pts: np.ndarray) -> list:
+    """Triangles (control point indices) of one polygon: a fan when convex, else ear clipping in
+    the polygon's best-fit plane (Newell normal)."""
+    n = len(corners)
+    if n < 3:
+        return []
+    if n == 3:
+        return [tuple(corners)]
+    p = pts[corners]
+    normal = np.zeros(3)
+    for i in range(n):
+        a, b = p[i], p[(i + 1) % n]
+        normal += np.array([(a[1] - b[1]) * (a[2] + b[2]), (a[2] - b[2]) * (a[0] + b[0]), (a[0] - b[0]) * (a[1] + b[1])])
+    nn = np.linalg.norm(normal)
+    if not np.isfinite(nn) or nn == 0:
+        return [(corners[0], corners[i], corners[i + 1]) for i in range(1, n - 1)]
+    normal /= nn
+    u = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    q = np.c_[p @ u, p @ v]
+
+    def cross(o, a, b):
+        return (q[a, 0] - q[o, 0]) * (q[b, 1] - q[o, 1]) - (q[a, 1] - q[o, 1]) * (q[b, 0] - q[o, 0])
+
+    if all(cross(i, (i + 1) % n, (i + 2) % n) >= 0 for i in range(n)):
+        return [(corners[0], corners[i], corners[i + 1]) for i in range(1, n - 1)]
+    idx = list(range(n))
+    out = []
+    guard = 0
+    while len(idx) > 3 and guard < 4 * n * n:
+        guard += 1
+        m = len(idx)
+        for k in range(m):
+            a, b, c = idx[k - 1], idx[k], idx[(k + 1) % m]
+            if cross(a, b, c) <= 0:
+                continue
+            inside = False
+            for o in idx:
+                if o in (a, b, c):
+                    continue
+                if cross(a, b, o) >= 0 and cross(b, c, o) >= 0 and cross(c, a, o) >= 0:
+                    inside = True
+                    break
+            if not inside:
+                out.append((corners[a], corners[b], corners[c]))
+                idx.pop(k)
+                break
+        else:  # no ear (degenerate or self-intersecting): a fan of what is left
+            break
+    out += [(corners[idx[0]], corners[idx[i]], corners[idx[i + 1]]) for i in range(1, len(idx) - 1)]
+    return out
+
+
+def _load(path):
+    import ufbx
+
+    def load(**kw):
+        try:
+            return ufbx.load_file(path, load_external_files=False, **kw)
+        except Exception as exc:  # ufbx reports every parse failure as its own error type
+            msg = " ".join(str(exc).split()) or type(exc).__name__
+            if "memory" in msg.lower() and "limit" not in msg.lower():
+                raise MemoryError(msg) from None
+            raise InputError(path, f"not a readable FBX file: {msg}") from None
+
+    scene = load()
+    A = ufbx.CoordinateAxis
+    axes = scene.settings.axes
+    frame = (axes.right, axes.up, axes.front)
+    if frame == (A.POSITIVE_X, A.POSITIVE_Y, A.POSITIVE_Z):
+        return scene, "Y", "FBX axes: right-handed Y-up"
+    if frame == (A.POSITIVE_X, A.POSITIVE_Z, A.NEGATIVE_Y):
+        return scene, "Z", "FBX axes: right-handed Z-up"
+    scene = load(target_axes=ufbx.CoordinateAxes(A.POSITIVE_X, A.POSITIVE_Y, A.POSITIVE_Z),
+                 space_conversion=ufbx.SpaceConversion.TRANSFORM_ROOT)
+    return scene, "Y", (f"FBX axes right={axes.right.name} up={axes.up.name} front={axes.front.name}, "
+                        "converted to right-handed Y-up by ufbx")
+
+
+class _Read:
+    """The ufbx scene walked once: nodes parents-first, their world transforms, the meshes."""
+
+    def __init__(self, path, scene, budget):
+        self.path, self.scene = path, scene
+        root = _safe(scene.root_node)
+        order, parents = [], []
+        stack = [(root, -1)]
+        while stack:
+            node, parent = stack.pop()
+            order.append(node)
+            parents.append(parent)
+            me = len(order) - 1
+            for child in reversed(_items(node.children)):
+                stack.append((child, me))
+        budget.claim(len(order) * 2000, f"{len(order)} nodes")
+        self.nodes = order
+        self.parents = np.array(parents, dtype=np.int64)
+        self.index = {n.typed_id: i for i, n in enumerate(order)}
+        self.names = [n.name or ("RootNode" if n.is_root else f"node{i}") for i, n in enumerate(order)]
+        self.world = self.worlds_of(order)
+        check_finite(path, "node transforms", self.world.reshape(len(order), 16))
+
+    def worlds_of(self, nodes) -> np.ndarray:
+        return np.array([_m44(n.node_to_world) for n in nodes])
+
+    def locals_of(self, world) -> np.ndarray:
+        out = world.copy()
+        p = self.parents
+        has = p >= 0
+        if np.any(has):
+            with np.errstate(all="ignore"):
+                out[has] = np.linalg.solve(world[p[has]], world[has])
+        return out
+
+
+def _mesh_records(r: _Read, budget, notes, items):
+    """(SceneMesh list, skinned info list) of every mesh instance ufbx found."""
+    meshes, skinned = [], []
+    for node_i, node in enumerate(r.nodes):
+        mesh = node.mesh
+        if mesh is None:
+            continue
+        mesh = _safe(mesh)
+        nv = int(mesh.num_vertices)
+        budget.claim(nv * 200 + int(mesh.num_indices) * 60, f"mesh {node.name!r} ({nv} vertices)")
+        pts = _vec3s(mesh.vertices)
+        check_finite(r.path, f"mesh {node.name!r} positions", pts)
+        vidx = _u32s(mesh.vertex_indices)
+        if len(vidx) and vidx.max() >= nv:
+            raise InputError(r.path, f"mesh {node.name!r}: a face index is out of range for {nv} vertices")
+        tris = []
+        for f in mesh.faces:
+            b, n = int(f[0]), int(f[1])
+            tris += _triangulate(vidx[b:b + n], pts)
+        tri = np.array(tris, dtype=np.int64).reshape(-1, 3)
+        instances = _items(mesh.instances)
+        skins = _items(mesh.skin_deformers)
+        skin = None
+        to_world = _m44(node.geometry_to_world)
+        if skins:
+            if instances and instances[0].typed_id != node.typed_id:
+                continue  # a later instance of a skinned mesh: fbx_instanced_skin below
+            if len(instances) > 1:
+                items.append(notcarried.item(
+                    "fbx_instanced_skin", [n.name for n in instances],
+                    f"skinned mesh {node.name!r} is instanced by {len(instances)} models; the first is taken"))
+            if len(skins) > 1:
+                items.append(notcarried.item(
+                    "fbx_skin_deformers", node.name,
+                    f"mesh {node.name!r} has {len(skins)} skin deformers; the first is taken"))
+            sk = skins[0]
+            clusters = _items(sk.clusters)
+            joints, ibms, names, vv, jj, ww = [], [], [], [], [], []
+            for ci, c in enumerate(clusters):
+                bone = c.bone_node
+                ids = _u32s(c.vertices)
+                w = _reals(c.weights)
+                if len(ids) != len(w) or (len(ids) and ids.max() >= nv):
+                    raise InputError(r.path, f"skin cluster {c.name!r}: vertex indices and weights do not match the mesh")
+                check_finite(r.path, f"skin cluster {c.name!r} weights", w[:, None])
+                if len(w) and w.min() < 0:
+                    raise InputError(r.path, f"skin cluster {c.name!r} has negative weights")
+                g2b = _m44(c.geometry_to_bone)
+                check_finite(r.path, f"skin cluster {c.name!r} bind matrix", g2b.reshape(1, 16))
+                if ci == 0:
+                    to_world = _m44(c.geometry_to_world)
+                joints.append(r.index.get(_safe(bone).typed_id, -1) if bone is not None else -1)
+                ibms.append(g2b)
+                names.append(bone.name if bone is not None else c.name)
+                vv.append(ids)
+                jj.append(np.full(len(ids), ci, dtype=np.int64))
+                ww.append(w)
+            if clusters:
+                skin = Skin(np.array(joints, dtype=np.int64), np.array(ibms), names,
+                            np.concatenate(vv), np.concatenate(jj), np.concatenate(ww))
+                skinned.append({"node": node_i, "name": node.name, "points": pts, "skin": skin,
+                                "bind_world": _m44(clusters[0].bind_to_world) @ _m44(clusters[0].mesh_node_to_bone)})
+        shapes = sum(len(_items(bd.channels)) for bd in _items(mesh.blend_deformers))
+        meshes.append(SceneMesh(name=node.name, node=node_i, positions=pts, triangles=tri, to_world=to_world,
+                                skin=skin, morph_targets=shapes))
+    return meshes, skinned
+
+
+def _bones_below(r: _Read, meshes) -> bool:
+    """True when an unskinned mesh hangs under a bone of a skin (it would move rigidly)."""
+    bones = {int(j) for m in meshes if m.skin is not None for j in m.skin.joints if j >= 0}
+    for m in meshes:
+        if m.skin is not None:
+            continue
+        a = r.parents[m.node]
+        while a >= 0:
+            if a in bones:
+                return True
+            a = r.parents[a]
+    return False
+
+
+def _sample_stacks(r: _Read, fps: float, correction, budget):
+    """``[(name, span, seconds, worlds (f, k, 4, 4))]`` of every animation stack, on its frame grid."""
+    out = []
+    for st in _items(r.scene.anim_stacks):
+        t0, t1 = float(st.time_begin), float(st.time_end)
+        if not (np.isfinite(t0) and np.isfinite(t1)) or t1 < t0:
+            continue
+        n = int(np.floor((t1 - t0) * fps + 1e-6)) + 1
+        budget.claim(n * len(r.nodes) * 16 * 8 * 3, f"animation {st.name!r} ({n} frames)")
+        seconds = t0 + np.arange(n) / fps
+        anim = st.anim
+        worlds = np.empty((n, len(r.nodes), 4, 4))
+        for f, t in enumerate(seconds):
+            ev = r.scene.evaluate(anim, float(t))
+            try:
+                evn = _items(ev.nodes)
+                by_id = {x.typed_id: x for x in evn}
+                worlds[f] = r.worlds_of([by_id[nd.typed_id] for nd in r.nodes])
+                if correction is not None:
+                    worlds[f] = correction(by_id) @ worlds[f]
+            finally:
+                ev.free()
+        check_finite(r.path, f"animation {st.name!r} transforms", worlds.reshape(-1, 16))
+        out.append((st.name, (t0, t1), seconds, worlds))
+    return out
+
+
+def _channels(r: _Read, rest_local, seconds, worlds):
+    """Translation / rotation / scale keys of every node whose local transform leaves its rest
+    value at some frame, and the locals those keys recompose to (for the check)."""
+    local = np.array([r.locals_of(w) for w in worlds])
+    moved = np.any(np.abs(local - rest_local[None]) > 1e-12 * (1 + np.abs(rest_local[None])), axis=(0, 2, 3))
+    chans = []
+    recomposed = np.broadcast_to(rest_local, local.shape).copy()
+    for k in np.flatnonzero(moved):
+        t, q, s = decompose_trs(local[:, k])
+        # one hemisphere from key to key, so that slerp between frames takes the short way
+        for i in range(1, len(q)):
+            if np.dot(q[i], q[i - 1]) < 0:
+                q[i] = -q[i]
+        recomposed[:, k] = compose_trs(t, q, s)
+        chans += [Channel(int(k), "t", seconds, t, "LINEAR"), Channel(int(k), "r", seconds, q, "LINEAR"),
+                  Channel(int(k), "s", seconds, s, "LINEAR")]
+    return chans, recomposed
+
+
+def _compose(local, parents) -> np.ndarray:
+    world = np.empty_like(local)
+    for i, p in enumerate(parents):
+        world[..., i, :, :] = local[..., i, :, :] if p < 0 else world[..., p, :, :] @ local[..., i, :, :]
+    return world
+
+
+def _lbs(info, world) -> np.ndarray:
+    """Exact skinned points of one skin at node worlds ``world`` (k, 4, 4)."""
+    s = info["skin"]
+    p = np.c_[info["points"], np.ones(len(info["points"]))]
+    out = np.zeros((len(p), 3))
+    tot = np.zeros(len(p))
+    for ci in range(len(s.joints)):
+        sel = s.joint == ci
+        if not np.any(sel) or s.joints[ci] < 0:
+            continue
+        m = world[s.joints[ci]] @ s.inverse_binds[ci]
+        v = s.vertex[sel]
+        np.add.at(out, v, s.weight[sel, None] * (p[v] @ m[:3, :].T))
+        np.add.at(tot, v, s.weight[sel])
+    live = tot > 0
+    out[live] /= tot[live, None]
+    return out[live]
+
+
+def read_ufbx(path, meshes=None, fps=None):
+    """Read a skinned mesh and all its clips from an FBX file through ufbx (module docstring)."""
+    path = os.fspath(path)
+    size = check_input_file(path)
+    budget = AllocationBudget(path, size)
+    version = fbx_doc.file_version(path)
+    if version is not None and 0 < version < OLDEST_READ:
+        raise InputError(path, f"FBX version {version} is not read (ufbx reads FBX 3.0 and later)")
+    scene, up, frame_note = _load(path)
+    r = _Read(path, scene, budget)
+    items, notes = [], []
+    scene_meshes, skinned = _mesh_records(r, budget, notes, items)
+    if not scene_meshes:
+        raise InputError(path, "the scene has no mesh")
+    rate = float(scene.settings.frames_per_second or 0.0)
+    if not (np.isfinite(rate) and 0 < rate <= 1000):
+        rate = 30.0
+    app = scene.metadata.original_application.name or ""
+
+    # Maya's transform_skin: C(t) = N(t) @ inv(N_bind) of the one skinned mesh node
+    correction, c_rest = None, np.eye(4)
+    if len(skinned) == 1:
+        info = skinned[0]
+        node_id = r.nodes[info["node"]].typed_id
+        bind_world = info["bind_world"]
+
+        def correction(by_id, _id=node_id, _b=bind_world):
+            return _m44(by_id[_id].node_to_world) @ np.linalg.inv(_b)
+
+        c_rest = r.world[info["node"]] @ np.linalg.inv(bind_world)
+    fold = "maya" in app.lower() and len(skinned) == 1 and not _bones_below(r, scene_meshes)
+    stacks = _sample_stacks(r, rate, correction if fold else None, budget)
+    world_rest = (c_rest @ r.world) if fold else r.world
+    rest_local = r.locals_of(world_rest)
+
+    anims = []
+    checks = [("rest", world_rest, _compose(rest_local, r.parents))]
+    for name, span, seconds, worlds in stacks:
+        chans, recomposed = _channels(r, rest_local, seconds, worlds)
+        anims.append(Animation(name, chans, span))
+        pick = np.unique(np.linspace(0, len(seconds) - 1, min(CHECK_FRAMES, len(seconds))).round().astype(int))
+        for f in pick:
+            checks.append((f"{name} at {seconds[f]:.4g} s", worlds[f], _compose(recomposed[f], r.parents)))
+
+    sc = Scene(names=r.names, parents=r.parents, local=rest_local, meshes=scene_meshes, animations=anims,
+               notes=notes, fps_hint=rate, unweighted_follow_node=True,
+               sampling_note=f"FBX evaluated by ufbx at every frame of {rate:g} fps; lerp / slerp between")
+    mesh = build(sc, path, meshes=meshes, fps=fps, budget=budget,
+                 source={"file": os.path.basename(path), "format": "fbx", "reader": "ufbx",
+                         "frame": f"{frame_note}, {scene.settings.unit_meters:g} m per unit"
+                                  + (f"; {app}'s transform_skin applied" if fold and not np.allclose(c_rest, np.eye(4)) else "")})
+
+    # fail closed: the keys against the exact evaluation; transform_skin where not folded
+    size_ref = max((float(np.linalg.norm(np.ptp(_lbs(i, checks[0][1]), axis=0))) for i in skinned
+                    if len(i["points"])), default=0.0) or 1.0
+    worst, where = 0.0, ""
+    moved_skin = 0.0
+    for label, exact, ours in checks:
+        for info in skinned:
+            a, b = _lbs(info, exact), _lbs(info, ours)
+            if len(a):
+                d = float(np.max(np.linalg.norm(a - b, axis=1))) / size_ref
+                if d > worst:
+                    worst, where = d, label
+                if not fold and correction is not None and label == "rest":
+                    c = c_rest
+                    moved_skin = max(moved_skin, float(np.max(np.linalg.norm(a @ c[:3, :3].T + c[:3, 3] - a, axis=1))) / size_ref)
+    if worst > EVAL_TOLERANCE:
+        items.append(notcarried.item(
+            "fbx_evaluation", where, "the joint keys cannot hold the file's transforms exactly (shear from an "
+            "inherit type under non-uniform scale, or a singular transform)", worst))
+    for name, span, seconds, worlds in ([] if fold or correction is None else stacks):
+        info = skinned[0]
+        pick = np.unique(np.linspace(0, len(seconds) - 1, min(CHECK_FRAMES, len(seconds))).round().astype(int))
+        for f in pick:
+            t = float(seconds[f])
+            ev = scene.evaluate(_safe_anim(scene, name), t)
+            try:
+                by_id = {x.typed_id: x for x in _items(ev.nodes)}
+                c = correction(by_id)
+            finally:
+                ev.free()
+            a = _lbs(info, worlds[f])
+            if len(a):
+                moved_skin = max(moved_skin, float(np.max(np.linalg.norm(a @ c[:3, :3].T + c[:3, 3] - a, axis=1))) / size_ref)
+    if moved_skin > EVAL_TOLERANCE:
+        items.append(notcarried.item(
+            "fbx_transform_skin", skinned[0]["name"],
+            f"the skinned mesh's node moved after binding; {app or 'the authoring tool'} may move the skin with "
+            "it (Maya does), the FBX SDK does not: taken as the FBX SDK", moved_skin))
+
+    doc = fbx_doc.read_document(path)
+    checked = fbx_checks.check(doc, mesh, None, only=fbx_checks.UFBX_CHECKS)
+    items = checked + items
+    if mesh.source.get("morph_meshes") and doc is not None:
+        try:
+            m_item, inert = fbx_checks.morph(doc, mesh)
+        except fbx_checks.MALFORMED as e:
+            m_item, inert = fbx_checks.unchecked("the blend shapes", e), []
+        mesh.source["morph_meshes"] = {}
+        if m_item is not None:
+            items.insert(0, m_item)
+        if inert:
+            mesh.source["notes"] = mesh.source.get("notes", []) + [
+                f"blend shapes of {', '.join(inert)} have DeformPercent 0 at rest and in every curve: "
+                "nothing of them to carry"]
+    mesh.source["not_carried"] = items
+    return mesh.replace(up_axis=up, meters_per_unit=float(scene.settings.unit_meters or 0.01))
+
+
+def _safe_anim(scene, name):
+    for st in _items(scene.anim_stacks):
+        if st.name == name:
+            return st.anim
+    return scene.anim
