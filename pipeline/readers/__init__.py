@@ -30,11 +30,19 @@ USD_EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz")
 READERS = {ext: read_assimp for ext in ASSIMP_EXTENSIONS}
 READERS.update({ext: read_usd for ext in USD_EXTENSIONS})
 READERS.update({".glb": read_gltf, ".gltf": read_gltf})  # read from the spec: samplers, morph targets, skins
-# FBX as the authoring tools evaluate it (inherit types, pivots, geometric transforms, transform_skin)
-# when the ufbx binding is installed (the `pipeline` extra); assimp otherwise, or when
-# COLOSSUS_FBX_READER=assimp asks for it (to compare the two).
-if os.environ.get("COLOSSUS_FBX_READER", "ufbx") != "assimp" and _ufbx_available():
-    READERS[".fbx"] = read_ufbx
+
+
+def read_fbx(path, meshes=None, fps=None):
+    """FBX as the authoring tools evaluate it (inherit types, pivots, geometric transforms, Maya's
+    transform_skin: :mod:`.ufbx_reader`) when the ufbx binding is installed (the ``pipeline``
+    extra); through assimp otherwise, or when the environment sets ``COLOSSUS_FBX_READER=assimp``
+    (to compare the two roads; the assimp path names what it does not carry)."""
+    if os.environ.get("COLOSSUS_FBX_READER", "ufbx") != "assimp" and _ufbx_available():
+        return read_ufbx(path, meshes=meshes, fps=fps)
+    return read_assimp(path, meshes=meshes, fps=fps)
+
+
+READERS[".fbx"] = read_fbx
 
 
 def reader_for(path):

@@ -52,7 +52,7 @@ import numpy as np
 from .. import notcarried
 from ..errors import InputError
 from ..xforms import compose_trs, decompose_trs
-from . import fbx_checks, fbx_doc
+from . import bounds, fbx_checks, fbx_doc
 from .common import AllocationBudget, check_finite, check_input_file
 from .scene import Animation, Channel, Scene, SceneMesh, Skin
 from .scene.build import build
@@ -62,6 +62,9 @@ from .scene.build import build
 CHECK_FRAMES = 16
 #: A difference from ufbx's evaluation larger than this (x the model size) is not carried.
 EVAL_TOLERANCE = 1e-6
+#: A local transform that changes less than this (relative to its largest entry) over a clip is
+#: float32 noise of the stored curves, not motion (the check below still measures it).
+MOVED = 1e-7
 #: The oldest FBX version ufbx reads (FBX 3.0).
 OLDEST_READ = 3000
 
@@ -163,12 +166,12 @@ def _triangulate(corners: np.ndarray, pts: np.ndarray) -> list:
     return out
 
 
-def _load(path):
+def _load(path, **opts):
     import ufbx
 
     def load(**kw):
         try:
-            return ufbx.load_file(path, load_external_files=False, **kw)
+            return ufbx.load_file(path, load_external_files=False, **opts, **kw)
         except Exception as exc:  # ufbx reports every parse failure as its own error type
             msg = " ".join(str(exc).split()) or type(exc).__name__
             if "memory" in msg.lower() and "limit" not in msg.lower():
@@ -189,31 +192,58 @@ def _load(path):
                         "converted to right-handed Y-up by ufbx")
 
 
+#: Every ufbx scene read stays referenced for the life of the process: the 0.0.5 binding's element
+#: wrappers (leaked on purpose, :func:`_safe`) must never outlive the scene they point into.
+_KEEP = []
+
+
+def _local(tr) -> np.ndarray:
+    """ufbx Transform (translation, rotation quaternion x y z w, scale) -> 4x4 ``T R S``."""
+    return compose_trs(np.array(tuple(tr.translation)), np.array(tuple(tr.rotation)), np.array(tuple(tr.scale)))
+
+
 class _Read:
-    """The ufbx scene walked once: nodes parents-first, their world transforms, the meshes."""
+    """The ufbx scene walked once: nodes parents-first, their world transforms, the meshes.
+
+    The scene is loaded with ``inherit_mode_handling = HELPER_NODES``: ufbx inserts scale helper
+    nodes where a model does not inherit its parent's scale the normal way, so that every world
+    transform is its parent's times its local ``T R S`` (pivots, offsets and pre/post rotations
+    folded in by ufbx); :meth:`worlds_at` composes them, and the rest pose is checked against
+    ufbx's own ``node_to_world``.
+    """
 
     def __init__(self, path, scene, budget):
         self.path, self.scene = path, scene
-        root = _safe(scene.root_node)
-        order, parents = [], []
-        stack = [(root, -1)]
-        while stack:
-            node, parent = stack.pop()
-            order.append(node)
-            parents.append(parent)
-            me = len(order) - 1
-            for child in reversed(_items(node.children)):
-                stack.append((child, me))
-        budget.claim(len(order) * 2000, f"{len(order)} nodes")
-        self.nodes = order
+        nodes = _items(scene.nodes)
+        budget.claim(len(nodes) * 2000, f"{len(nodes)} nodes")
+        index = {n.typed_id: i for i, n in enumerate(nodes)}
+        parents = []
+        for i, n in enumerate(nodes):
+            p = n.parent
+            q = index.get(_safe(p).typed_id, -1) if p is not None else -1
+            if q >= i:
+                raise InputError(path, "the node hierarchy is not ordered parents first (corrupt file?)")
+            parents.append(q)
+        self.nodes = nodes
         self.parents = np.array(parents, dtype=np.int64)
-        self.index = {n.typed_id: i for i, n in enumerate(order)}
-        self.names = [n.name or ("RootNode" if n.is_root else f"node{i}") for i, n in enumerate(order)]
-        self.world = self.worlds_of(order)
-        check_finite(path, "node transforms", self.world.reshape(len(order), 16))
+        self.index = index
+        self.names = [n.name or ("RootNode" if n.is_root else f"node{i}") for i, n in enumerate(nodes)]
+        self.helpers = {i for i, n in enumerate(nodes) if n.is_scale_helper or n.is_geometry_transform_helper}
+        self.world = self.compose(np.array([_local(n.local_transform) for n in nodes]))
+        check_finite(path, "node transforms", self.world.reshape(len(nodes), 16))
+        #: ufbx's own world transforms at rest (the reference the composition is checked against)
+        self.theirs = np.array([_m44(n.node_to_world) for n in nodes]).reshape(-1, 4, 4)
 
-    def worlds_of(self, nodes) -> np.ndarray:
-        return np.array([_m44(n.node_to_world) for n in nodes])
+    def compose(self, local) -> np.ndarray:
+        """World transforms (..., k, 4, 4) of local ones."""
+        world = np.empty_like(local)
+        for i, p in enumerate(self.parents):
+            world[..., i, :, :] = local[..., i, :, :] if p < 0 else world[..., p, :, :] @ local[..., i, :, :]
+        return world
+
+    def worlds_at(self, anim, t: float) -> np.ndarray:
+        import ufbx
+        return self.compose(np.array([_local(ufbx.evaluate_transform(anim, n, t)) for n in self.nodes]))
 
     def locals_of(self, world) -> np.ndarray:
         out = world.copy()
@@ -307,7 +337,7 @@ def _bones_below(r: _Read, meshes) -> bool:
     return False
 
 
-def _sample_stacks(r: _Read, fps: float, correction, budget):
+def _sample_stacks(r: _Read, fps: float, budget):
     """``[(name, span, seconds, worlds (f, k, 4, 4))]`` of every animation stack, on its frame grid."""
     out = []
     for st in _items(r.scene.anim_stacks):
@@ -315,20 +345,10 @@ def _sample_stacks(r: _Read, fps: float, correction, budget):
         if not (np.isfinite(t0) and np.isfinite(t1)) or t1 < t0:
             continue
         n = int(np.floor((t1 - t0) * fps + 1e-6)) + 1
-        budget.claim(n * len(r.nodes) * 16 * 8 * 3, f"animation {st.name!r} ({n} frames)")
+        budget.claim(n * len(r.nodes) * 16 * 8 * 4, f"animation {st.name!r} ({n} frames)")
         seconds = t0 + np.arange(n) / fps
         anim = st.anim
-        worlds = np.empty((n, len(r.nodes), 4, 4))
-        for f, t in enumerate(seconds):
-            ev = r.scene.evaluate(anim, float(t))
-            try:
-                evn = _items(ev.nodes)
-                by_id = {x.typed_id: x for x in evn}
-                worlds[f] = r.worlds_of([by_id[nd.typed_id] for nd in r.nodes])
-                if correction is not None:
-                    worlds[f] = correction(by_id) @ worlds[f]
-            finally:
-                ev.free()
+        worlds = np.array([r.worlds_at(anim, float(t)) for t in seconds])
         check_finite(r.path, f"animation {st.name!r} transforms", worlds.reshape(-1, 16))
         out.append((st.name, (t0, t1), seconds, worlds))
     return out
@@ -338,7 +358,9 @@ def _channels(r: _Read, rest_local, seconds, worlds):
     """Translation / rotation / scale keys of every node whose local transform leaves its rest
     value at some frame, and the locals those keys recompose to (for the check)."""
     local = np.array([r.locals_of(w) for w in worlds])
-    moved = np.any(np.abs(local - rest_local[None]) > 1e-12 * (1 + np.abs(rest_local[None])), axis=(0, 2, 3))
+    # moved: beyond float32 noise of the file's own values (curves are stored in float32)
+    scale = 1.0 + np.maximum(np.abs(rest_local).max(axis=(1, 2)), np.abs(local).max(axis=(0, 2, 3)))
+    moved = np.abs(local - rest_local[None]).max(axis=(0, 2, 3)) > MOVED * scale
     chans = []
     recomposed = np.broadcast_to(rest_local, local.shape).copy()
     for k in np.flatnonzero(moved):
@@ -351,13 +373,6 @@ def _channels(r: _Read, rest_local, seconds, worlds):
         chans += [Channel(int(k), "t", seconds, t, "LINEAR"), Channel(int(k), "r", seconds, q, "LINEAR"),
                   Channel(int(k), "s", seconds, s, "LINEAR")]
     return chans, recomposed
-
-
-def _compose(local, parents) -> np.ndarray:
-    world = np.empty_like(local)
-    for i, p in enumerate(parents):
-        world[..., i, :, :] = local[..., i, :, :] if p < 0 else world[..., p, :, :] @ local[..., i, :, :]
-    return world
 
 
 def _lbs(info, world) -> np.ndarray:
@@ -381,13 +396,16 @@ def _lbs(info, world) -> np.ndarray:
 
 def read_ufbx(path, meshes=None, fps=None):
     """Read a skinned mesh and all its clips from an FBX file through ufbx (module docstring)."""
+    import ufbx
+
     path = os.fspath(path)
     size = check_input_file(path)
     budget = AllocationBudget(path, size)
     version = fbx_doc.file_version(path)
     if version is not None and 0 < version < OLDEST_READ:
         raise InputError(path, f"FBX version {version} is not read (ufbx reads FBX 3.0 and later)")
-    scene, up, frame_note = _load(path)
+    scene, up, frame_note = _load(path, inherit_mode_handling=ufbx.InheritModeHandling.HELPER_NODES)
+    _KEEP.append(scene)
     r = _Read(path, scene, budget)
     items, notes = [], []
     scene_meshes, skinned = _mesh_records(r, budget, notes, items)
@@ -397,45 +415,56 @@ def read_ufbx(path, meshes=None, fps=None):
     if not (np.isfinite(rate) and 0 < rate <= 1000):
         rate = 30.0
     app = scene.metadata.original_application.name or ""
+    stacks = _sample_stacks(r, rate, budget)
 
-    # Maya's transform_skin: C(t) = N(t) @ inv(N_bind) of the one skinned mesh node
-    correction, c_rest = None, np.eye(4)
+    # transform_skin: C = N @ inv(N_bind) of the one skinned mesh node, at rest and at every frame
+    fold, moved_by = False, 0.0
     if len(skinned) == 1:
         info = skinned[0]
-        node_id = r.nodes[info["node"]].typed_id
-        bind_world = info["bind_world"]
-
-        def correction(by_id, _id=node_id, _b=bind_world):
-            return _m44(by_id[_id].node_to_world) @ np.linalg.inv(_b)
-
-        c_rest = r.world[info["node"]] @ np.linalg.inv(bind_world)
-    fold = "maya" in app.lower() and len(skinned) == 1 and not _bones_below(r, scene_meshes)
-    stacks = _sample_stacks(r, rate, correction if fold else None, budget)
-    world_rest = (c_rest @ r.world) if fold else r.world
-    rest_local = r.locals_of(world_rest)
+        inv_bind = np.linalg.inv(info["bind_world"])
+        c_rest = r.world[info["node"]] @ inv_bind
+        c_frames = [worlds[:, info["node"]] @ inv_bind for _, _, _, worlds in stacks]
+        moves = not all(np.allclose(c, np.eye(4), rtol=0, atol=1e-9 * (1 + np.abs(info["bind_world"]).max()))
+                        for c in [c_rest, *[x for cf in c_frames for x in cf]])
+        if moves and "maya" in app.lower() and not _bones_below(r, scene_meshes):
+            fold = True
+            r.world, r.theirs = c_rest @ r.world, c_rest @ r.theirs
+            stacks = [(n, sp, sec, cf[:, None] @ w) for (n, sp, sec, w), cf in zip(stacks, c_frames)]
+        elif moves:
+            worst = 0.0
+            for label, world, c in [("rest", r.world, c_rest)] + [
+                    (n, w[f], cf[f]) for (n, _, _, w), cf in zip(stacks, c_frames)
+                    for f in _check_frames(len(w))]:
+                a = _lbs(info, world)
+                if len(a):
+                    worst = max(worst, float(np.max(np.linalg.norm(a @ c[:3, :3].T + c[:3, 3] - a, axis=1))))
+            moved_by = worst
+    rest_local = r.locals_of(r.world)
 
     anims = []
-    checks = [("rest", world_rest, _compose(rest_local, r.parents))]
+    checks = [("rest", r.theirs, r.compose(rest_local))]
     for name, span, seconds, worlds in stacks:
         chans, recomposed = _channels(r, rest_local, seconds, worlds)
         anims.append(Animation(name, chans, span))
-        pick = np.unique(np.linspace(0, len(seconds) - 1, min(CHECK_FRAMES, len(seconds))).round().astype(int))
-        for f in pick:
-            checks.append((f"{name} at {seconds[f]:.4g} s", worlds[f], _compose(recomposed[f], r.parents)))
+        for f in _check_frames(len(seconds)):
+            checks.append((f"{name} at {seconds[f]:.4g} s", worlds[f], r.compose(recomposed[f])))
 
     sc = Scene(names=r.names, parents=r.parents, local=rest_local, meshes=scene_meshes, animations=anims,
-               notes=notes, fps_hint=rate, unweighted_follow_node=True,
+               notes=notes, helpers=r.helpers, fps_hint=rate, unweighted_follow_node=True,
                sampling_note=f"FBX evaluated by ufbx at every frame of {rate:g} fps; lerp / slerp between")
     mesh = build(sc, path, meshes=meshes, fps=fps, budget=budget,
                  source={"file": os.path.basename(path), "format": "fbx", "reader": "ufbx",
                          "frame": f"{frame_note}, {scene.settings.unit_meters:g} m per unit"
-                                  + (f"; {app}'s transform_skin applied" if fold and not np.allclose(c_rest, np.eye(4)) else "")})
+                                  + (f"; {app}'s transform_skin applied (the skin moves with its node)" if fold else "")})
 
-    # fail closed: the keys against the exact evaluation; transform_skin where not folded
-    size_ref = max((float(np.linalg.norm(np.ptp(_lbs(i, checks[0][1]), axis=0))) for i in skinned
-                    if len(i["points"])), default=0.0) or 1.0
-    worst, where = 0.0, ""
-    moved_skin = 0.0
+    # fail closed: the keys against the exact evaluation; the bounds relative to the posed size
+    size_ref = bounds.posed_size(mesh) or 1.0
+    if moved_by / size_ref > EVAL_TOLERANCE:
+        items.append(notcarried.item(
+            "fbx_transform_skin", skinned[0]["name"],
+            f"the skinned mesh's node moved after binding; {app or 'the authoring tool'} may move the skin "
+            "with it (Maya does), the FBX SDK does not: taken as the FBX SDK", moved_by / size_ref))
+    worst, where = 0.0, "rest"
     for label, exact, ours in checks:
         for info in skinned:
             a, b = _lbs(info, exact), _lbs(info, ours)
@@ -443,36 +472,13 @@ def read_ufbx(path, meshes=None, fps=None):
                 d = float(np.max(np.linalg.norm(a - b, axis=1))) / size_ref
                 if d > worst:
                     worst, where = d, label
-                if not fold and correction is not None and label == "rest":
-                    c = c_rest
-                    moved_skin = max(moved_skin, float(np.max(np.linalg.norm(a @ c[:3, :3].T + c[:3, 3] - a, axis=1))) / size_ref)
     if worst > EVAL_TOLERANCE:
         items.append(notcarried.item(
-            "fbx_evaluation", where, "the joint keys cannot hold the file's transforms exactly (shear from an "
-            "inherit type under non-uniform scale, or a singular transform)", worst))
-    for name, span, seconds, worlds in ([] if fold or correction is None else stacks):
-        info = skinned[0]
-        pick = np.unique(np.linspace(0, len(seconds) - 1, min(CHECK_FRAMES, len(seconds))).round().astype(int))
-        for f in pick:
-            t = float(seconds[f])
-            ev = scene.evaluate(_safe_anim(scene, name), t)
-            try:
-                by_id = {x.typed_id: x for x in _items(ev.nodes)}
-                c = correction(by_id)
-            finally:
-                ev.free()
-            a = _lbs(info, worlds[f])
-            if len(a):
-                moved_skin = max(moved_skin, float(np.max(np.linalg.norm(a @ c[:3, :3].T + c[:3, 3] - a, axis=1))) / size_ref)
-    if moved_skin > EVAL_TOLERANCE:
-        items.append(notcarried.item(
-            "fbx_transform_skin", skinned[0]["name"],
-            f"the skinned mesh's node moved after binding; {app or 'the authoring tool'} may move the skin with "
-            "it (Maya does), the FBX SDK does not: taken as the FBX SDK", moved_skin))
+            "fbx_evaluation", where, "the joint keys cannot hold the file's transforms exactly (shear, or a "
+            "transform ufbx composes differently from its parent's times its own)", worst))
 
     doc = fbx_doc.read_document(path)
-    checked = fbx_checks.check(doc, mesh, None, only=fbx_checks.UFBX_CHECKS)
-    items = checked + items
+    items = fbx_checks.check(doc, mesh, None, only=fbx_checks.UFBX_CHECKS) + items
     if mesh.source.get("morph_meshes") and doc is not None:
         try:
             m_item, inert = fbx_checks.morph(doc, mesh)
@@ -489,8 +495,5 @@ def read_ufbx(path, meshes=None, fps=None):
     return mesh.replace(up_axis=up, meters_per_unit=float(scene.settings.unit_meters or 0.01))
 
 
-def _safe_anim(scene, name):
-    for st in _items(scene.anim_stacks):
-        if st.name == name:
-            return st.anim
-    return scene.anim
+def _check_frames(n: int) -> np.ndarray:
+    return np.unique(np.linspace(0, n - 1, min(CHECK_FRAMES, n)).round().astype(int)) if n else np.zeros(0, int)
