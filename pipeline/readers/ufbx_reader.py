@@ -202,7 +202,30 @@ def _local(tr) -> np.ndarray:
     return compose_trs(np.array(tuple(tr.translation)), np.array(tuple(tr.rotation)), np.array(tuple(tr.scale)))
 
 
-class _Read:
+class _Graph:
+    """Nodes parents-first with their world transforms: composing and splitting (plain numpy)."""
+
+    def __init__(self, names, parents, world, theirs):
+        self.names, self.parents, self.world, self.theirs = names, parents, world, theirs
+
+    def compose(self, local) -> np.ndarray:
+        """World transforms (..., k, 4, 4) of local ones."""
+        world = np.empty_like(local)
+        for i, p in enumerate(self.parents):
+            world[..., i, :, :] = local[..., i, :, :] if p < 0 else world[..., p, :, :] @ local[..., i, :, :]
+        return world
+
+    def locals_of(self, world) -> np.ndarray:
+        out = world.copy()
+        p = self.parents
+        has = p >= 0
+        if np.any(has):
+            with np.errstate(all="ignore"):
+                out[has] = np.linalg.solve(world[p[has]], world[has])
+        return out
+
+
+class _Read(_Graph):
     """The ufbx scene walked once: nodes parents-first, their world transforms, the meshes.
 
     The scene is loaded with ``inherit_mode_handling = HELPER_NODES``: ufbx inserts scale helper
@@ -234,25 +257,9 @@ class _Read:
         #: ufbx's own world transforms at rest (the reference the composition is checked against)
         self.theirs = np.array([_m44(n.node_to_world) for n in nodes]).reshape(-1, 4, 4)
 
-    def compose(self, local) -> np.ndarray:
-        """World transforms (..., k, 4, 4) of local ones."""
-        world = np.empty_like(local)
-        for i, p in enumerate(self.parents):
-            world[..., i, :, :] = local[..., i, :, :] if p < 0 else world[..., p, :, :] @ local[..., i, :, :]
-        return world
-
     def worlds_at(self, anim, t: float) -> np.ndarray:
         import ufbx
         return self.compose(np.array([_local(ufbx.evaluate_transform(anim, n, t)) for n in self.nodes]))
-
-    def locals_of(self, world) -> np.ndarray:
-        out = world.copy()
-        p = self.parents
-        has = p >= 0
-        if np.any(has):
-            with np.errstate(all="ignore"):
-                out[has] = np.linalg.solve(world[p[has]], world[has])
-        return out
 
 
 def _mesh_records(r: _Read, budget, notes, items):
@@ -323,17 +330,17 @@ def _mesh_records(r: _Read, budget, notes, items):
     return meshes, skinned
 
 
-def _bones_below(r: _Read, meshes) -> bool:
+def _bones_below(parents, meshes) -> bool:
     """True when an unskinned mesh hangs under a bone of a skin (it would move rigidly)."""
     bones = {int(j) for m in meshes if m.skin is not None for j in m.skin.joints if j >= 0}
     for m in meshes:
         if m.skin is not None:
             continue
-        a = r.parents[m.node]
+        a = parents[m.node]
         while a >= 0:
             if a in bones:
                 return True
-            a = r.parents[a]
+            a = parents[a]
     return False
 
 
@@ -394,47 +401,132 @@ def _lbs(info, world) -> np.ndarray:
     return out[live]
 
 
-def read_ufbx(path, meshes=None, fps=None):
-    """Read a skinned mesh and all its clips from an FBX file through ufbx (module docstring)."""
+class _Extracted:
+    """Everything the reader needs from ufbx, as plain data (picklable: it crosses the fork)."""
+
+    def __init__(self, **kw):
+        self.__dict__.update(kw)
+
+
+def _extract(path, budget) -> _Extracted:
+    """Read the file with ufbx (in the contained child: :func:`read_ufbx`)."""
     import ufbx
 
+    scene, up, frame_note = _load(path, inherit_mode_handling=ufbx.InheritModeHandling.HELPER_NODES)
+    _KEEP.append(scene)
+    r = _Read(path, scene, budget)
+    items = []
+    scene_meshes, skinned = _mesh_records(r, budget, [], items)
+    rate = float(scene.settings.frames_per_second or 0.0)
+    if not (np.isfinite(rate) and 0 < rate <= 1000):
+        rate = 30.0
+    stacks = _sample_stacks(r, rate, budget)
+    exact = _independent(path, skinned, stacks)
+    return _Extracted(exact=exact, up=up, frame_note=frame_note, unit_meters=float(scene.settings.unit_meters or 0.01),
+                      app=str(scene.metadata.original_application.name or ""), rate=rate, names=r.names,
+                      parents=r.parents, helpers=r.helpers, world=r.world, theirs=r.theirs,
+                      meshes=scene_meshes, skinned=skinned, items=items, stacks=stacks)
+
+
+def _independent(path, skinned, stacks) -> dict:
+    """``{label: [points (n, 3) of each skinned mesh]}``: the skinned control points as ufbx's own
+    scene evaluates them, with the file loaded again *without* helper nodes (inherit types
+    evaluated natively, clusters bound to the real bones): ``sum_j w_j W_j geometry_to_bone_j p``
+    at rest and at :func:`_check_frames` of every stack.  The reference the keys are checked
+    against.  The evaluated scenes are freed by the process exit (the contained child), never by
+    the binding's garbage collection."""
+    import gc
+
+    gc.disable()
+    scene, _, _ = _load(path)
+    _KEEP.append(scene)
+
+    def points(sc):
+        by_name = {}
+        for n in _items(sc.nodes):
+            if n.mesh is not None and _items(n.mesh.skin_deformers):
+                by_name.setdefault(n.name, n)
+        out = []
+        for info in skinned:
+            node = by_name.get(info["name"])
+            if node is None:
+                return None
+            mesh = _safe(node.mesh)
+            clusters = _items(_items(mesh.skin_deformers)[0].clusters)
+            p = np.c_[info["points"], np.ones(len(info["points"]))]
+            acc, tot = np.zeros((len(p), 3)), np.zeros(len(p))
+            for c in clusters:
+                if c.bone_node is None:
+                    continue
+                m = _m44(_safe(c.bone_node).node_to_world) @ _m44(c.geometry_to_bone)
+                v, w = _u32s(c.vertices), _reals(c.weights)
+                np.add.at(acc, v, w[:, None] * (p[v] @ m[:3, :].T))
+                np.add.at(tot, v, w)
+            live = tot > 0
+            acc[live] /= tot[live, None]
+            out.append(acc[live])
+        return out
+
+    out = {"rest": points(scene)}
+    by_name = {st.name: st for st in _items(scene.anim_stacks)}
+    for name, _, seconds, _ in stacks:
+        st = by_name.get(name)
+        if st is None:
+            continue
+        for f in _check_frames(len(seconds)):
+            ev = scene.evaluate(st.anim, float(seconds[f]))
+            _KEEP.append(ev)
+            out[f"{name} at {seconds[f]:.4g} s"] = points(ev)
+    return {k: v for k, v in out.items() if v is not None}
+
+
+def _extract_contained(path, budget):
+    """:func:`_extract` in a forked child: the binding's memory errors (a crash at garbage
+    collection after its scenes are freed) can never reach this process, and the child leaves
+    by ``os._exit``.  Inside the import's own contained child this is a second, cheap fork."""
+    from .. import isolation
+    try:
+        return isolation.contained(_extract, path, budget, path=path, timeout=600)
+    except isolation.ChildFailed as e:
+        raise InputError(path, f"ufbx could not read it ({e.reason})") from None
+
+
+def read_ufbx(path, meshes=None, fps=None):
+    """Read a skinned mesh and all its clips from an FBX file through ufbx (module docstring)."""
     path = os.fspath(path)
     size = check_input_file(path)
     budget = AllocationBudget(path, size)
     version = fbx_doc.file_version(path)
     if version is not None and 0 < version < OLDEST_READ:
         raise InputError(path, f"FBX version {version} is not read (ufbx reads FBX 3.0 and later)")
-    scene, up, frame_note = _load(path, inherit_mode_handling=ufbx.InheritModeHandling.HELPER_NODES)
-    _KEEP.append(scene)
-    r = _Read(path, scene, budget)
-    items, notes = [], []
-    scene_meshes, skinned = _mesh_records(r, budget, notes, items)
+    x = _extract_contained(path, budget)
+    budget.claim(sum(w.nbytes for *_, w in x.stacks), "the sampled animation")
+    items, notes = list(x.items), []
+    scene_meshes, skinned, stacks, app = x.meshes, x.skinned, x.stacks, x.app
     if not scene_meshes:
         raise InputError(path, "the scene has no mesh")
-    rate = float(scene.settings.frames_per_second or 0.0)
-    if not (np.isfinite(rate) and 0 < rate <= 1000):
-        rate = 30.0
-    app = scene.metadata.original_application.name or ""
-    stacks = _sample_stacks(r, rate, budget)
+    r = _Graph(x.names, x.parents, x.world, x.theirs)
 
     # transform_skin: C = N @ inv(N_bind) of the one skinned mesh node, at rest and at every frame
     fold, moved_by = False, 0.0
     if len(skinned) == 1:
         info = skinned[0]
-        inv_bind = np.linalg.inv(info["bind_world"])
+        try:
+            inv_bind = np.linalg.inv(info["bind_world"])
+        except np.linalg.LinAlgError:
+            raise InputError(path, f"skinned mesh {info['name']!r} has a singular bind transform") from None
         c_rest = r.world[info["node"]] @ inv_bind
         c_frames = [worlds[:, info["node"]] @ inv_bind for _, _, _, worlds in stacks]
         moves = not all(np.allclose(c, np.eye(4), rtol=0, atol=1e-9 * (1 + np.abs(info["bind_world"]).max()))
                         for c in [c_rest, *[x for cf in c_frames for x in cf]])
-        if moves and "maya" in app.lower() and not _bones_below(r, scene_meshes):
+        if moves and "maya" in app.lower() and not _bones_below(r.parents, scene_meshes):
             fold = True
             r.world, r.theirs = c_rest @ r.world, c_rest @ r.theirs
             stacks = [(n, sp, sec, cf[:, None] @ w) for (n, sp, sec, w), cf in zip(stacks, c_frames)]
         elif moves:
             worst = 0.0
-            for label, world, c in [("rest", r.world, c_rest)] + [
-                    (n, w[f], cf[f]) for (n, _, _, w), cf in zip(stacks, c_frames)
-                    for f in _check_frames(len(w))]:
+            for world, c in [(r.world, c_rest)] + [
+                    (w[f], cf[f]) for (n, _, _, w), cf in zip(stacks, c_frames) for f in _check_frames(len(w))]:
                 a = _lbs(info, world)
                 if len(a):
                     worst = max(worst, float(np.max(np.linalg.norm(a @ c[:3, :3].T + c[:3, 3] - a, axis=1))))
@@ -442,19 +534,23 @@ def read_ufbx(path, meshes=None, fps=None):
     rest_local = r.locals_of(r.world)
 
     anims = []
-    checks = [("rest", r.theirs, r.compose(rest_local))]
-    for name, span, seconds, worlds in stacks:
+    c_at = {}
+    checks = [("rest", r.compose(rest_local))]
+    for si, (name, span, seconds, worlds) in enumerate(stacks):
         chans, recomposed = _channels(r, rest_local, seconds, worlds)
         anims.append(Animation(name, chans, span))
         for f in _check_frames(len(seconds)):
-            checks.append((f"{name} at {seconds[f]:.4g} s", worlds[f], r.compose(recomposed[f])))
+            label = f"{name} at {seconds[f]:.4g} s"
+            checks.append((label, r.compose(recomposed[f])))
+            c_at[label] = c_frames[si][f] if fold else None
+    c_at["rest"] = c_rest if fold else None
 
-    sc = Scene(names=r.names, parents=r.parents, local=rest_local, meshes=scene_meshes, animations=anims,
-               notes=notes, helpers=r.helpers, fps_hint=rate, unweighted_follow_node=True,
-               sampling_note=f"FBX evaluated by ufbx at every frame of {rate:g} fps; lerp / slerp between")
+    sc = Scene(names=x.names, parents=x.parents, local=rest_local, meshes=scene_meshes, animations=anims,
+               notes=notes, helpers=x.helpers, fps_hint=x.rate, unweighted_follow_node=True,
+               sampling_note=f"FBX evaluated by ufbx at every frame of {x.rate:g} fps; lerp / slerp between")
     mesh = build(sc, path, meshes=meshes, fps=fps, budget=budget,
                  source={"file": os.path.basename(path), "format": "fbx", "reader": "ufbx",
-                         "frame": f"{frame_note}, {scene.settings.unit_meters:g} m per unit"
+                         "frame": f"{x.frame_note}, {x.unit_meters:g} m per unit"
                                   + (f"; {app}'s transform_skin applied (the skin moves with its node)" if fold else "")})
 
     # fail closed: the keys against the exact evaluation; the bounds relative to the posed size
@@ -465,17 +561,25 @@ def read_ufbx(path, meshes=None, fps=None):
             f"the skinned mesh's node moved after binding; {app or 'the authoring tool'} may move the skin "
             "with it (Maya does), the FBX SDK does not: taken as the FBX SDK", moved_by / size_ref))
     worst, where = 0.0, "rest"
-    for label, exact, ours in checks:
-        for info in skinned:
-            a, b = _lbs(info, exact), _lbs(info, ours)
-            if len(a):
+    for label, ours in checks:
+        ref = x.exact.get(label)
+        if ref is None:  # no independent reference (a mesh ufbx's plain load names otherwise): unchecked
+            worst, where = np.inf, label
+            continue
+        c = c_at.get(label)
+        for info, a in zip(skinned, ref):
+            if c is not None:
+                a = a @ c[:3, :3].T + c[:3, 3]
+            b = _lbs(info, ours)
+            if len(a) and len(a) == len(b):
                 d = float(np.max(np.linalg.norm(a - b, axis=1))) / size_ref
                 if d > worst:
                     worst, where = d, label
     if worst > EVAL_TOLERANCE:
         items.append(notcarried.item(
             "fbx_evaluation", where, "the joint keys cannot hold the file's transforms exactly (shear, or a "
-            "transform ufbx composes differently from its parent's times its own)", worst))
+            "transform ufbx composes differently from its parent's times its own)",
+            worst if np.isfinite(worst) else None))
 
     doc = fbx_doc.read_document(path)
     items = fbx_checks.check(doc, mesh, None, only=fbx_checks.UFBX_CHECKS) + items
@@ -492,7 +596,9 @@ def read_ufbx(path, meshes=None, fps=None):
                 f"blend shapes of {', '.join(inert)} have DeformPercent 0 at rest and in every curve: "
                 "nothing of them to carry"]
     mesh.source["not_carried"] = items
-    return mesh.replace(up_axis=up, meters_per_unit=float(scene.settings.unit_meters or 0.01))
+    return mesh.replace(up_axis=x.up, meters_per_unit=x.unit_meters)
+
+
 
 
 def _check_frames(n: int) -> np.ndarray:

@@ -29,6 +29,12 @@ def _items(path, **kw):
     return not_carried(read(path, **kw))
 
 
+@pytest.fixture
+def assimp_road(monkeypatch):
+    """FBX read through assimp (the road without ufbx), whose checks name what it cannot carry."""
+    monkeypatch.setenv("COLOSSUS_FBX_READER", "assimp")
+
+
 def _whats(path):
     return [x["what"] for x in _items(path)]
 
@@ -134,13 +140,38 @@ def paths_dq(tmp_path):
                  "dq", ascii_too=False)[0]
 
 
-def test_fbx_inherit_type_rrss_fires_under_a_non_uniform_scale_only(tmp_path):
-    def edit(scale, inherit):
-        def f(top):
-            W.set_p70(W.find(top, "Model", name="LimbArmature")[0], "Lcl Scaling", "Lcl Scaling", scale)
-            for b in W.find(top, "Model", "LimbNode"):
-                W.set_p70(b, "InheritType", "enum", [inherit], flags="")
-        return f
+def _rrss_edit(scale, inherit):
+    def f(top):
+        W.set_p70(W.find(top, "Model", name="LimbArmature")[0], "Lcl Scaling", "Lcl Scaling", scale)
+        for b in W.find(top, "Model", "LimbNode"):
+            W.set_p70(b, "InheritType", "enum", [inherit], flags="")
+    return f
+
+
+def test_fbx_inherit_type_rrss_through_ufbx_is_carried_and_checked(tmp_path, monkeypatch):
+    """ufbx evaluates RrSs under a non-uniformly scaled parent (its helper nodes hold the parent
+    scale each bone must not inherit): the keys reproduce ufbx's native evaluation (the file loaded
+    again without helpers, clusters on the real bones) at rest and at the checked frames, so
+    nothing is named.  Keys 1 % off that evaluation are named, with their bound."""
+    from colossus.pipeline.readers import ufbx_reader as U
+    bad = _limb(tmp_path, _rrss_edit([1.0, 2.0, 1.0], 0), "rrss")
+    for p in bad:
+        assert _items(p) == []
+    orig = U._channels
+
+    def off(r, rest_local, seconds, worlds):
+        chans, recomposed = orig(r, rest_local, seconds, worlds)
+        recomposed = recomposed.copy()
+        recomposed[:, :, :3, :3] *= 1.01
+        return chans, recomposed
+
+    monkeypatch.setattr(U, "_channels", off)
+    items = _items(bad[0])
+    assert [x["what"] for x in items] == ["fbx_evaluation"] and 0.005 < items[0]["bound_relative"] < 0.1
+
+
+def test_fbx_inherit_type_rrss_fires_under_a_non_uniform_scale_only(tmp_path, assimp_road):
+    edit = _rrss_edit
     bad = _limb(tmp_path, edit([1.0, 2.0, 1.0], 0), "rrss")
     for p in bad:
         items = _items(p)
@@ -150,8 +181,11 @@ def test_fbx_inherit_type_rrss_fires_under_a_non_uniform_scale_only(tmp_path):
     assert _items(_limb(tmp_path, edit([2.0, 2.0, 2.0], 0), "uniform", ascii_too=False)[0]) == []
 
 
-def test_fbx_transform_skin_is_bounded_by_the_node_offset(tmp_path):
-    """The mesh node moved after binding (its BindPose matrix kept): the bound is the offset."""
+@pytest.mark.parametrize("road", ["ufbx", "assimp"])
+def test_fbx_transform_skin_is_bounded_by_the_node_offset(tmp_path, road, monkeypatch):
+    """The mesh node moved after binding (its BindPose matrix kept): the bound is the offset.
+    (limb.fbx is Blender's: only Maya's files get Maya's rule, the skin moved with its node.)"""
+    monkeypatch.setenv("COLOSSUS_FBX_READER", road)
     def edit(top):
         m = W.find(top, "Model", "Mesh")[0]
         p70 = {p.props[0][1]: p for p in m.child("Properties70").children}
@@ -169,7 +203,20 @@ def test_fbx_transform_skin_is_bounded_by_the_node_offset(tmp_path):
     _one_line_refusal(paths[0], tmp_path, "fbx_transform_skin")
 
 
-def test_fbx_geometric_transform_on_a_skinned_mesh(tmp_path):
+def test_fbx_geometric_transform_on_a_skinned_mesh_through_ufbx_is_carried(tmp_path):
+    """ufbx binds the geometry in its geometric transform's space: nothing is left out, and the
+    bind positions are the unedited ones moved by the geometric offset (one rigid shift)."""
+    from colossus.pipeline.readers import read
+    paths = _limb(tmp_path, lambda top: W.set_p70(W.find(top, "Model", "Mesh")[0], "GeometricTranslation",
+                                                  "Vector3D", [0.0, 0.5, 0.0], flags=""), "geo")
+    base = read(SAMPLES / "limb.fbx")
+    for p in paths:
+        assert _items(p) == []
+        d = read(p).positions.astype(np.float64) - base.positions
+        assert np.ptp(d, axis=0).max() < 1e-5 and np.linalg.norm(d[0]) > 0.1
+
+
+def test_fbx_geometric_transform_on_a_skinned_mesh(tmp_path, assimp_road):
     paths = _limb(tmp_path, lambda top: W.set_p70(W.find(top, "Model", "Mesh")[0], "GeometricTranslation",
                                                   "Vector3D", [0.0, 0.5, 0.0], flags=""), "geo")
     for p in paths:
@@ -180,7 +227,9 @@ def test_fbx_geometric_transform_on_a_skinned_mesh(tmp_path):
     _one_line_refusal(paths[0], tmp_path, "fbx_geometric_transform")
 
 
-def test_fbx_instanced_skin_and_constraints(tmp_path):
+@pytest.mark.parametrize("road", ["ufbx", "assimp"])
+def test_fbx_instanced_skin_and_constraints(tmp_path, road, monkeypatch):
+    monkeypatch.setenv("COLOSSUS_FBX_READER", road)
     def edit(top):
         mesh = W.find(top, "Model", "Mesh")[0]
         geo = W.find(top, "Geometry", "Mesh")[0]
@@ -199,7 +248,7 @@ def test_fbx_instanced_skin_and_constraints(tmp_path):
         assert whats.count("fbx_instanced_skin") == 1 and whats.count("fbx_constraints") == 1
 
 
-def test_fbx_cubic_curve_between_sparse_keys(tmp_path):
+def test_fbx_cubic_curve_between_sparse_keys(tmp_path, assimp_road):
     """Rotation curves cut to their first key and the one farthest from it, with a cubic (ease) segment: the grid
     frames in between are off the straight line assimp draws; made linear, nothing fires."""
     def edit(flags):
@@ -223,7 +272,40 @@ def test_fbx_cubic_curve_between_sparse_keys(tmp_path):
     assert _items(_limb(tmp_path, edit(0x104), "linear", ascii_too=False)[0]) == []
 
 
-def test_fbx_before_7_1_is_refused_in_one_line(tmp_path):
+def test_fbx_cubic_curve_through_ufbx_is_evaluated_at_every_frame(tmp_path):
+    """ufbx evaluates the cubic segment at every grid frame: the frames are the curve's, nothing to name."""
+    from colossus.pipeline.readers import read
+
+    def edit(top):
+        for c in W.find(top, "AnimationCurve"):
+            kt = c.child("KeyTime").props[0][1]
+            kv = c.child("KeyValueFloat").props[0][1]
+            if np.ptp(kv) < 1e-3:
+                continue
+            mid = int(np.argmax(np.abs(kv - kv[0])))
+            W.set_child(c, "KeyTime", [("l", kt[[0, mid]])])
+            W.set_child(c, "KeyValueFloat", [("f", kv[[0, mid]])])
+            W.set_child(c, "KeyAttrFlags", [("i", np.array([0x108], dtype=np.int32))])
+            W.set_child(c, "KeyAttrDataFloat", [("f", np.zeros(4, dtype=np.float32))])
+            W.set_child(c, "KeyAttrRefCount", [("i", np.array([2], dtype=np.int32))])
+    p = _limb(tmp_path, edit, "cubic", ascii_too=False)[0]
+    assert _items(p) == []
+    # every grid frame is the curve's own: between the two keys the clip is off the straight
+    # (slerp) line assimp would draw, by the ease
+    from colossus.pipeline.xforms import decompose_trs, slerp
+    m = read(p)
+    clip = m.clips[0]
+    _, q, _ = decompose_trs(clip.local)
+    j = int(np.argmax([min(np.abs(q[:, k] - q[0, k]).max(), np.abs(q[:, k] + q[0, k]).max()) for k in range(q.shape[1])]))
+    qa = q[:, j]
+    k = int(np.argmax([min(np.abs(x - qa[0]).max(), np.abs(x + qa[0]).max()) for x in qa]))
+    assert k > 2
+    line = slerp(qa[0], qa[k], (k // 2) / k)
+    mid = qa[k // 2]
+    assert min(np.abs(mid - line).max(), np.abs(mid + line).max()) > 1e-3
+
+
+def test_fbx_before_7_1_is_refused_in_one_line(tmp_path, assimp_road):
     version, top, foot = W.read(SAMPLES / "limb.fbx")
     W.set_child(next(n for n in top if n.name == "FBXHeaderExtension"), "FBXVersion", [("I", 6100)])
     old = tmp_path / "old.fbx"
@@ -365,9 +447,10 @@ def test_summary_json_provenance_and_inspect_carry_the_record(tmp_path):
     ("max_transformed_skin_7500_binary.fbx", {"fbx_geometric_transform", "fbx_curve_interpolation"}),
     ("maya_transformed_skin_7700_binary.fbx", {"fbx_transform_skin", "fbx_curve_interpolation"}),
 ])
-def test_dcc_files_are_named_not_silent(name, whats, tmp_path):
-    """Each corpus/dcc file is 0.1 to 0.7 x its size off its tool's own mesh today
-    (tests/references/dcc_errors.py): the import names why, with bounds, and --strict refuses."""
+def test_dcc_files_are_named_not_silent_on_the_assimp_road(name, whats, tmp_path, assimp_road):
+    """Through assimp each corpus/dcc file is 0.1 to 0.7 x its size off its tool's own mesh
+    (tests/references/dcc_errors.py): the import names why, with bounds, and --strict refuses.
+    Through ufbx they match their truths (tests/references/test_dcc.py)."""
     p = DCC / name
     if not p.exists():
         pytest.skip("corpus not present")
