@@ -311,8 +311,9 @@ def _mesh_records(r: _Read, budget, notes, items):
                     raise InputError(r.path, f"skin cluster {c.name!r} has negative weights")
                 g2b = _m44(c.geometry_to_bone)
                 check_finite(r.path, f"skin cluster {c.name!r} bind matrix", g2b.reshape(1, 16))
-                if ci == 0:
-                    to_world = _m44(c.geometry_to_world)
+                if ci == 0:  # the mesh geometry's world transform at bind time (its bone's bind
+                    # pose times geometry_to_bone; the cluster's geometry_to_world is not that)
+                    to_world = _m44(c.bind_to_world) @ g2b
                 joints.append(r.index.get(_safe(bone).typed_id, -1) if bone is not None else -1)
                 ibms.append(g2b)
                 names.append(bone.name if bone is not None else c.name)
@@ -325,7 +326,7 @@ def _mesh_records(r: _Read, budget, notes, items):
                 skinned.append({"node": node_i, "name": node.name, "points": pts, "skin": skin,
                                 "bind_world": _m44(clusters[0].bind_to_world) @ _m44(clusters[0].mesh_node_to_bone)})
         shapes = sum(len(_items(bd.channels)) for bd in _items(mesh.blend_deformers))
-        meshes.append(SceneMesh(name=node.name, node=node_i, positions=pts, triangles=tri, to_world=to_world,
+        meshes.append(SceneMesh(name=mesh.name or node.name, node=node_i, positions=pts, triangles=tri, to_world=to_world,
                                 skin=skin, morph_targets=shapes))
     return meshes, skinned
 

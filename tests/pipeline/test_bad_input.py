@@ -19,7 +19,7 @@ import pytest
 from click.testing import CliRunner
 
 import faults
-from paths import ROOT, SAMPLES
+from paths import ROOT, SAMPLES, fbx_road
 
 #: Warning categories Python hides by default (what a user running ``colossus`` never sees).
 HIDDEN = (DeprecationWarning, PendingDeprecationWarning, ImportWarning, ResourceWarning)
@@ -814,7 +814,10 @@ def test_fbx_zlib_bomb_refusal_has_a_reason(work, run_import, kind):
     src.write_bytes(fbx_write(version, top, footer))
     out = work / "o.usda"
     r = run_import(src, out)
-    assert_clean_failure(r, out, "bomb.fbx: not a readable FBX file: ")
+    # ufbx allocates for the claim and meets the contained reader's memory cap: the usual line
+    needle = ("needs more memory than" if kind == "claims" and fbx_road() == "ufbx"
+              else "bomb.fbx: not a readable FBX file: ")
+    assert_clean_failure(r, out, needle)
     assert not r.stderr.rstrip().endswith(":"), r.stderr
 
 
