@@ -18,12 +18,14 @@ The ``what`` ids (README, "Not carried"):
 
 ========================  ======================================================================
 ``morph_targets``         glTF morph targets, FBX blend shapes, USD ``skel:blendShapes``
+``fbx_evaluation``        (ufbx road) joint keys that do not reproduce ufbx's native evaluation
 ``fbx_skinning_type``     FBX Skin ``SkinningType`` DualQuaternion, or Blend with non-zero
                           per-vertex ``BlendWeights`` (we skin linearly)
 ``fbx_inherit_type``      FBX ``InheritType`` 0 (RrSs) under a non-uniformly scaled parent
 ``fbx_transform_skin``    a skinned mesh node whose world transform differs from its bind pose
 ``fbx_geometric_transform``  GeometricTranslation / Rotation / Scaling on a skinned mesh node
 ``fbx_instanced_skin``    one skinned geometry instanced by several models
+``fbx_skin_deformers``    (ufbx road) a mesh with more than one skin deformer
 ``fbx_constraints``       FBX constraint objects (their effect is only in baked keys, if any)
 ``fbx_curve_interpolation``  cubic / constant FBX curve segments spanning grid frames (assimp
                           interpolates every curve linearly between its keys)
