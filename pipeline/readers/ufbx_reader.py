@@ -51,7 +51,7 @@ import numpy as np
 
 from .. import notcarried
 from ..errors import InputError
-from ..xforms import compose_trs, decompose_trs
+from ..xforms import compose_trs, decompose_trs, slerp
 from . import bounds, fbx_checks, fbx_doc
 from .common import AllocationBudget, check_finite, check_input_file
 from .scene import Animation, Channel, Scene, SceneMesh, Skin
@@ -62,6 +62,9 @@ from .scene.build import build
 CHECK_FRAMES = 16
 #: A difference from ufbx's evaluation larger than this (x the model size) is not carried.
 EVAL_TOLERANCE = 1e-6
+#: Between frames, a gap from the file's curves larger than this (x the model size, the motion
+#: tolerance the references use) is stated in the summary (a resampling bound, not a record).
+BETWEEN_TOLERANCE = 1e-4
 #: A local transform that changes less than this (relative to its largest entry) over a clip is
 #: float32 noise of the stored curves, not motion (the check below still measures it).
 MOVED = 1e-7
@@ -369,7 +372,7 @@ def _channels(r: _Read, rest_local, seconds, worlds):
     # moved: beyond float32 noise of the file's own values (curves are stored in float32)
     scale = 1.0 + np.maximum(np.abs(rest_local).max(axis=(1, 2)), np.abs(local).max(axis=(0, 2, 3)))
     moved = np.abs(local - rest_local[None]).max(axis=(0, 2, 3)) > MOVED * scale
-    chans = []
+    chans, trs = [], {}
     recomposed = np.broadcast_to(rest_local, local.shape).copy()
     for k in np.flatnonzero(moved):
         t, q, s = decompose_trs(local[:, k])
@@ -378,9 +381,19 @@ def _channels(r: _Read, rest_local, seconds, worlds):
             if np.dot(q[i], q[i - 1]) < 0:
                 q[i] = -q[i]
         recomposed[:, k] = compose_trs(t, q, s)
+        trs[int(k)] = (t, q, s)
         chans += [Channel(int(k), "t", seconds, t, "LINEAR"), Channel(int(k), "r", seconds, q, "LINEAR"),
                   Channel(int(k), "s", seconds, s, "LINEAR")]
-    return chans, recomposed
+    return chans, recomposed, trs
+
+
+def _halfway(rest_local, trs, f) -> np.ndarray:
+    """Local transforms halfway between frames ``f`` and ``f + 1`` as UsdSkel interpolates the keys
+    (lerp translations and scales, slerp rotations)."""
+    out = rest_local.copy()
+    for k, (t, q, s) in trs.items():
+        out[k] = compose_trs(0.5 * (t[f] + t[f + 1]), slerp(q[f], q[f + 1], 0.5), 0.5 * (s[f] + s[f + 1]))
+    return out
 
 
 def _lbs(info, world) -> np.ndarray:
@@ -430,7 +443,8 @@ def _extract(path, budget) -> _Extracted:
 
 
 def _independent(path, skinned, stacks) -> dict:
-    """``{label: [points (n, 3) of each skinned mesh]}``: the skinned control points as ufbx's own
+    """``{label: [(points (n, 3), node world (4, 4)) of each skinned mesh]}``: the skinned control
+    points (and the mesh node's world transform, for transform_skin) as ufbx's own
     scene evaluates them, with the file loaded again *without* helper nodes (inherit types
     evaluated natively, clusters bound to the real bones): ``sum_j w_j W_j geometry_to_bone_j p``
     at rest and at :func:`_check_frames` of every stack.  The reference the keys are checked
@@ -465,7 +479,7 @@ def _independent(path, skinned, stacks) -> dict:
                 np.add.at(tot, v, w)
             live = tot > 0
             acc[live] /= tot[live, None]
-            out.append(acc[live])
+            out.append((acc[live], _m44(node.node_to_world)))
         return out
 
     out = {"rest": points(scene)}
@@ -478,6 +492,11 @@ def _independent(path, skinned, stacks) -> dict:
             ev = scene.evaluate(st.anim, float(seconds[f]))
             _KEEP.append(ev)
             out[f"{name} at {seconds[f]:.4g} s"] = points(ev)
+            if f + 1 < len(seconds):  # halfway to the next frame: the curves between the samples
+                mid = 0.5 * (seconds[f] + seconds[f + 1])
+                ev = scene.evaluate(st.anim, float(mid))
+                _KEEP.append(ev)
+                out[f"{name} between frames at {mid:.4g} s"] = points(ev)
     return {k: v for k, v in out.items() if v is not None}
 
 
@@ -535,15 +554,19 @@ def read_ufbx(path, meshes=None, fps=None):
     rest_local = r.locals_of(r.world)
 
     anims = []
-    c_at = {}
+    c_at, between = {}, []
     checks = [("rest", r.compose(rest_local))]
     for si, (name, span, seconds, worlds) in enumerate(stacks):
-        chans, recomposed = _channels(r, rest_local, seconds, worlds)
+        chans, recomposed, trs = _channels(r, rest_local, seconds, worlds)
         anims.append(Animation(name, chans, span))
         for f in _check_frames(len(seconds)):
             label = f"{name} at {seconds[f]:.4g} s"
             checks.append((label, r.compose(recomposed[f])))
             c_at[label] = c_frames[si][f] if fold else None
+            if f + 1 < len(seconds):
+                mid = f"{name} between frames at {0.5 * (seconds[f] + seconds[f + 1]):.4g} s"
+                between.append((mid, r.compose(_halfway(rest_local, trs, f))))
+                c_at[mid] = "halfway"
     c_at["rest"] = c_rest if fold else None
 
     sc = Scene(names=x.names, parents=x.parents, local=rest_local, meshes=scene_meshes, animations=anims,
@@ -568,7 +591,7 @@ def read_ufbx(path, meshes=None, fps=None):
             worst, where = np.inf, label
             continue
         c = c_at.get(label)
-        for info, a in zip(skinned, ref):
+        for info, (a, node_world) in zip(skinned, ref):
             if c is not None:
                 a = a @ c[:3, :3].T + c[:3, 3]
             b = _lbs(info, ours)
@@ -576,6 +599,28 @@ def read_ufbx(path, meshes=None, fps=None):
                 d = float(np.max(np.linalg.norm(a - b, axis=1))) / size_ref
                 if d > worst:
                     worst, where = d, label
+    # between frames: the file's curves against the keys' lerp / slerp (a resampling error, the
+    # same for every reader that samples curves on a grid; named when over the motion tolerance)
+    gap, gap_at = 0.0, ""
+    for label, ours in between:
+        ref = x.exact.get(label)
+        if ref is None:
+            continue
+        for info, (a, node_world) in zip(skinned, ref):
+            if fold:
+                c = node_world @ np.linalg.inv(info["bind_world"])
+                a = a @ c[:3, :3].T + c[:3, 3]
+            b = _lbs(info, ours)
+            if len(a) and len(a) == len(b):
+                d = float(np.max(np.linalg.norm(a - b, axis=1))) / size_ref
+                if d > gap:
+                    gap, gap_at = d, label
+    mesh.source["between_frames"] = {"bound_relative": gap, "where": gap_at}
+    if gap > BETWEEN_TOLERANCE:
+        mesh.source["notes"] = mesh.source.get("notes", []) + [
+            f"between its {x.rate:g} fps frames the file's curves are up to {gap:.2g} x the model size off the "
+            f"frames' lerp / slerp ({gap_at}); engines that sample FBX animation per frame play the frames' "
+            "interpolation too; a higher --fps follows the curves closer"]
     if worst > EVAL_TOLERANCE:
         items.append(notcarried.item(
             "fbx_evaluation", where, "the joint keys cannot hold the file's transforms exactly (shear, or a "
