@@ -31,7 +31,7 @@ def _list_rules(ctx, param, value):
 
 @click.command("validate")
 @click.argument("paths", nargs=-1, type=click.Path())
-@click.option("--format", "fmt", type=click.Choice(["text", "json", "junit", "html"]), default="text", show_default=True,
+@click.option("--format", "fmt", type=click.Choice(["text", "json", "junit", "html", "sarif", "github"]), default="text", show_default=True,
               help="Report format.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True),
               help="Write the report to FILE (atomically) instead of stdout.")
