@@ -86,13 +86,14 @@ def build_cmd(assets, config, jobs, scheduler, force, dry_run, progress, verbose
     Exit 0 every entry built or up to date; 1 any failed; 2 a bad project file or usage;
     130 interrupted.
     """
-    from colossus.cli.project import build_stamp, read_stamp, select_entries
+    from colossus.cli.project import StampCache, build_stamp, select_entries
     from colossus.pipeline.engine import Engine, Progress, Task, make_backend
     from colossus.pipeline.errors import one_line
 
     t0 = time.perf_counter()
     project = _load(config)
     entries = select_entries(project, assets)
+    cache = StampCache(project.root)
     todo, skipped, rows = [], [], {}
     for e in entries:
         try:
@@ -100,14 +101,15 @@ def build_cmd(assets, config, jobs, scheduler, force, dry_run, progress, verbose
         except OSError as exc:
             rows[id(e)] = {"ok": False, "error": f"cannot read the source: {exc.strerror or exc}"}
             continue
-        have = None if force else read_stamp(e.output)
-        if have is not None and have.get("key") == want["key"]:
+        have = None if force else cache.key(e.output)
+        if have is not None and have == want["key"]:
             skipped.append(e)
         else:
             todo.append((e, want))
     t_plan = time.perf_counter() - t0
     root = project.root
     if dry_run:
+        cache.save()
         for e, _ in todo:
             click.echo(f"would build  {_rel(e.source, root)} -> {_rel(e.output, root)}")
         click.echo(f"{len(todo)} to build, {len(skipped)} up to date")
@@ -136,6 +138,12 @@ def build_cmd(assets, config, jobs, scheduler, force, dry_run, progress, verbose
         engine.run([task(e, s) for e, s in sorted(todo, key=lambda es: -_size(es[0].source))])
     finally:
         bar.close()
+    stamps = {id(e): s for e, s in todo}
+    for e in entries:  # what was written now is known without reading it back
+        r = rows.get(id(e))
+        if r is not None and r["ok"]:
+            cache.remember(e.output, stamps[id(e)]["key"])
+    cache.save()
     built = failed = 0
     for e in entries:
         r = rows.get(id(e))

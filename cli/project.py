@@ -521,6 +521,72 @@ def read_stamp(path: str) -> dict | None:
     return None
 
 
+CACHE_DIR = ".colossus_cache"
+
+
+class StampCache:
+    """``<project>/.colossus_cache/build.json``: the build key last seen in each output, with the
+    output's (mtime_ns, size, inode) when it was seen (git's index, DVC's state), so a no-op
+    ``build`` need not open 200 assets.  Only a shortcut: an output whose stat differs is read
+    again (:func:`read_stamp`), and ``check`` always reads the asset itself."""
+
+    def __init__(self, root: str):
+        self.path = os.path.join(root, CACHE_DIR, "build.json")
+        try:
+            with open(self.path) as fh:
+                self.data = json.load(fh)
+            if not isinstance(self.data, dict):
+                self.data = {}
+        except (OSError, ValueError):
+            self.data = {}
+        self.dirty = False
+
+    @staticmethod
+    def _sig(path):
+        try:
+            st = os.stat(path)
+        except OSError:
+            return None
+        return [st.st_mtime_ns, st.st_size, st.st_ino]
+
+    def key(self, output: str) -> str | None:
+        """The build key stored in ``output`` (None: no output, or none stored)."""
+        sig = self._sig(output)
+        if sig is None:
+            return None
+        hit = self.data.get(output)
+        if isinstance(hit, list) and len(hit) == 4 and hit[:3] == sig:
+            return hit[3]
+        stamp = read_stamp(output)
+        key = stamp.get("key") if stamp else None
+        self.remember(output, key)
+        return key
+
+    def remember(self, output: str, key: str | None) -> None:
+        sig = self._sig(output)
+        if sig is None or key is None:
+            self.dirty = self.data.pop(output, None) is not None or self.dirty
+            return
+        self.data[output] = sig + [key]
+        self.dirty = True
+
+    def save(self) -> None:
+        """Write the cache (atomically; a cache that cannot be written is silently not kept)."""
+        if not self.dirty:
+            return
+        from colossus.pipeline.tempfiles import write_atomic
+
+        try:
+            os.makedirs(os.path.dirname(self.path), exist_ok=True)
+            gi = os.path.join(os.path.dirname(self.path), ".gitignore")
+            if not os.path.exists(gi):
+                with open(gi, "w") as fh:
+                    fh.write("# made by colossus build: a cache, never committed\n*\n")
+            write_atomic(self.path, json.dumps(self.data, sort_keys=True))
+        except OSError:
+            pass
+
+
 def staleness(stamp: dict | None, want: dict) -> list:
     """What changed between the stored ``stamp`` and the ``want`` ed one: a list of ``source``,
     ``settings``, ``importer version`` (empty: up to date)."""

@@ -242,3 +242,25 @@ def test_validate_honours_the_project_validate_table(project):
     assert r.exit_code == 0 and "COL404" not in r.stdout
     r = run("validate", project / "slack.usda", "--ignore", "COL206")  # the command line wins
     assert "COL404" in r.stdout
+
+
+def test_readme_project_file_is_valid(tmp_path, monkeypatch):
+    """The README's colossus.toml example loads as written (its sources made here)."""
+    from paths import ROOT
+    readme = (ROOT / "README.md").read_text()
+    section = readme.split("## A data-driven pipeline")[1]
+    toml = section.split("```toml\n", 1)[1].split("```", 1)[0]
+    (tmp_path / "exports" / "boss").mkdir(parents=True)
+    (tmp_path / "exports" / "limb.glb").write_bytes((SAMPLES / "limb.glb").read_bytes())
+    glb_to_gltf(SAMPLES / "limb.glb", tmp_path / "exports" / "boss" / "boss.gltf", "boss.bin")
+    (tmp_path / "colossus.toml").write_text(toml)
+    monkeypatch.chdir(tmp_path)
+    r = run("config", "--json")
+    assert r.exit_code == 0, r.output
+    cfg = json.loads(r.stdout)
+    assert [a["output"] for a in cfg["assets"]] == ["colliders/limb.usdc", "colliders/boss.usdc"]
+    assert cfg["assets"][1]["waiver"]["reason"].startswith("armour")
+    from colossus.cli.project import dependencies
+    assert [Path(d).name for d in dependencies(str(tmp_path / "exports" / "boss" / "boss.gltf"))] == ["boss.bin"]
+    hooks = (ROOT / ".pre-commit-hooks.yaml").read_text()
+    assert "- id: colossus-check" in hooks and "entry: colossus check" in hooks
