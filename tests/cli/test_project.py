@@ -264,3 +264,30 @@ def test_readme_project_file_is_valid(tmp_path, monkeypatch):
     assert [Path(d).name for d in dependencies(str(tmp_path / "exports" / "boss" / "boss.gltf"))] == ["boss.bin"]
     hooks = (ROOT / ".pre-commit-hooks.yaml").read_text()
     assert "- id: colossus-check" in hooks and "entry: colossus check" in hooks
+
+
+def test_usd_sublayers_and_references_are_part_of_the_key(tmp_path):
+    """A USD source's sublayers and references (followed recursively, each file once) go into its
+    key; one that cannot be resolved is named, so the key changes when it appears."""
+    from colossus.cli.project import Entry, build_stamp, dependencies
+    from colossus.pipeline.run import ImportSettings
+
+    (tmp_path / "deep.usda").write_text('#usda 1.0\ndef "D" {}\n')
+    (tmp_path / "sub.usda").write_text('#usda 1.0\n(\n    subLayers = [@./deep.usda@]\n)\n')
+    (tmp_path / "ref.usda").write_text('#usda 1.0\ndef "R" {}\n')
+    (tmp_path / "main.usda").write_text(
+        '#usda 1.0\n(\n    subLayers = [@./sub.usda@]\n)\ndef "A" (references = [@./ref.usda@, @./later.usda@]) {}\n')
+    deps = dependencies(str(tmp_path / "main.usda"))
+    names = sorted(Path(d).name if not d.startswith("missing:") else d for d in deps)
+    assert names == ["deep.usda", "missing:./later.usda", "ref.usda", "sub.usda"], deps
+    e = Entry(0, "main", str(tmp_path / "main.usda"), str(tmp_path / "o.usda"), ImportSettings())
+    k0 = build_stamp(e)
+    (tmp_path / "deep.usda").write_text('#usda 1.0\ndef "D2" {}\n')
+    k1 = build_stamp(e)
+    assert k1["key"] != k0["key"] and k1["inputsSha256"] != k0["inputsSha256"]
+    assert k1["settingsSha256"] == k0["settingsSha256"]
+    (tmp_path / "later.usda").write_text('#usda 1.0\n')
+    assert build_stamp(e)["key"] != k1["key"]
+    e.settings = ImportSettings(max_influences=2)
+    k3 = build_stamp(e)
+    assert k3["settingsSha256"] != k1["settingsSha256"]
