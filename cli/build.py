@@ -28,11 +28,17 @@ config_option = click.option("--config", "config", type=click.Path(dir_okay=Fals
                                   "[tool.colossus], found walking up from the working directory).")
 
 
-def _load(config):
-    from colossus.cli.project import ProjectError, load_project
+set_option = click.option("--set", "sets", multiple=True, metavar="KEY=VALUE",
+                          help="Override the project file for this run (wins over [import], [validate] and the "
+                               "entries): an import option (max-influences=2) or validate.NAME (validate.subframes=2).")
 
+
+def _load(config, sets=()):
+    from colossus.cli.project import ProjectError, load_project, parse_overrides
+
+    overrides = parse_overrides(sets)  # a malformed --set: UsageError, exit 2
     try:
-        return load_project(config)
+        return load_project(config, overrides=overrides)
     except ProjectError as e:
         raise CommandError(str(e), 2) from None
 
@@ -68,6 +74,7 @@ def _build_unit(src, out, settings, strict, stamp):
 @click.command("build")
 @click.argument("assets", nargs=-1)
 @config_option
+@set_option
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Import in N parallel processes.")
 @click.option("--scheduler", metavar="ADDRESS",
@@ -78,7 +85,7 @@ def _build_unit(src, out, settings, strict, stamp):
               help="Progress bar on stderr (default: when stderr is a terminal).")
 @click.option("-v", "--verbose", is_flag=True, help="Also list the entries skipped as up to date.")
 @maps_errors(input_status=1)
-def build_cmd(assets, config, jobs, scheduler, force, dry_run, progress, verbose):
+def build_cmd(assets, config, sets, jobs, scheduler, force, dry_run, progress, verbose):
     """Import the project's [[asset]] entries whose source, settings or importer version changed.
 
     \b
@@ -91,7 +98,7 @@ def build_cmd(assets, config, jobs, scheduler, force, dry_run, progress, verbose
     from colossus.pipeline.errors import one_line
 
     t0 = time.perf_counter()
-    project = _load(config)
+    project = _load(config, sets)
     entries = select_entries(project, assets)
     cache = StampCache(project.root)
     todo, skipped, rows = [], [], {}
@@ -176,6 +183,7 @@ def _size(path) -> int:
 
 @click.command("check")
 @config_option
+@set_option
 @click.option("--format", "fmt", type=click.Choice(["text", "json", "junit", "sarif", "github"]), default="text",
               show_default=True, help="Format of the validation report.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False), help="Write the validation report to FILE.")
@@ -185,7 +193,7 @@ def _size(path) -> int:
 @click.option("--progress/--no-progress", default=None,
               help="Progress bar on stderr (default: when stderr is a terminal).")
 @maps_errors(input_status=2)
-def check_cmd(config, fmt, output, deep, jobs, progress):
+def check_cmd(config, sets, fmt, output, deep, jobs, progress):
     """CI gate: every [[asset]] output exists, is up to date with its source, settings and importer
     version, and passes validate with the project's rules.
 
@@ -197,7 +205,7 @@ def check_cmd(config, fmt, output, deep, jobs, progress):
     from colossus.validators.parallel import check_many
     from colossus.validators.report import render as render_report, write_atomic
 
-    project = _load(config)
+    project = _load(config, sets)
     root = project.root
     problems, present = [], []
     for e in project.entries:
@@ -250,14 +258,15 @@ def check_cmd(config, fmt, output, deep, jobs, progress):
 
 @click.command("config")
 @config_option
+@set_option
 @click.option("--json", "as_json", is_flag=True, help="Print the resolved settings as JSON.")
 @maps_errors(input_status=2)
-def config_cmd(config, as_json):
+def config_cmd(config, sets, as_json):
     """Print the project file found and the resolved settings of every [[asset]] entry.
     Exit 0; 2 a bad project file."""
     from colossus.cli.project import describe
 
-    project = _load(config)
+    project = _load(config, sets)
     doc = {"project": project.path, "root": project.root,
            "validate": {**{k.replace("_", "-"): v for k, v in project.validate.items()},
                         "strict": project.validate_strict},

@@ -177,9 +177,33 @@ def key_line(text: str, table: str | None, key: str | None, entry: int | None = 
 
 
 # ------------------------------------------------------------------------------ loading
-def load_project(path: str | None = None, start: str | None = None) -> Project:
+def parse_overrides(items) -> dict:
+    """``--set KEY=VALUE`` options (VALUE in TOML: ``max-influences=2``, ``mesh=["Body"]``,
+    ``up-axis=Z``, bare words taken as strings) as ``{"import": {...}, "validate": {...}}``; a key
+    ``validate.NAME`` goes to ``[validate]``, any other to ``[import]``.  Raises :class:`UsageError`."""
+    out = {"import": {}, "validate": {}}
+    for item in items or ():
+        key, eq, value = str(item).partition("=")
+        key = key.strip()
+        if not eq or not key:
+            raise UsageError(f"--set {item!r}: expected KEY=VALUE, e.g. max-influences=2")
+        try:
+            v = tomllib.loads(f"v = {value.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            v = value.strip()
+        table, _, name = key.rpartition(".")
+        table = table or "import"
+        if table not in out:
+            raise UsageError(f"--set {item!r}: a key is NAME (an [import] option) or validate.NAME")
+        out[table][name] = v
+    return out
+
+
+def load_project(path: str | None = None, start: str | None = None, overrides: dict | None = None) -> Project:
     """Read and check the project file ``path`` (default: :func:`find_project` from ``start``);
-    raises :class:`ProjectError` when there is none or it is wrong."""
+    raises :class:`ProjectError` when there is none or it is wrong.  ``overrides``
+    (:func:`parse_overrides`: the command line's ``--set``) win over the file, per-asset values
+    included."""
     from colossus.pipeline.run import ImportSettings
 
     if path is None:
@@ -227,10 +251,20 @@ def load_project(path: str | None = None, start: str | None = None) -> Project:
     if not isinstance(imp, dict):
         raise err(None, "import", "expected a table [import]")
     base_import = _import_options(imp, "import", None, err, check_type)
+    over = overrides or {}
+
+    def flag_err(table, key, msg, entry=None):
+        return ProjectError(f"--set {'validate.' if table == 'validate' else ''}{key}: {msg}")
+
+    cli_import = _import_options(over.get("import") or {}, "import", None, flag_err, _type_checker(flag_err))
     val = doc.get("validate", {})
     if not isinstance(val, dict):
         raise err(None, "validate", "expected a table [validate]")
     validate, vstrict = _validate_options(val, err, check_type)
+    if over.get("validate"):
+        extra, s2 = _validate_options(over["validate"], flag_err, _type_checker(flag_err))
+        validate.update(extra)
+        vstrict = s2 if "strict" in over["validate"] else vstrict
     assets = doc.get("asset", [])
     if not isinstance(assets, list) or not all(isinstance(a, dict) for a in assets):
         raise err(None, "asset", "expected [[asset]] tables")
@@ -246,7 +280,7 @@ def load_project(path: str | None = None, start: str | None = None) -> Project:
             if req not in a:
                 raise err("asset", None, f"the entry has no {req!r}", i)
         opts = {**base_import, **_import_options({k: v for k, v in a.items() if k in IMPORT_KEYS}, "asset", i,
-                                                 err, check_type)}
+                                                 err, check_type), **cli_import}
         strict = bool(opts.pop("strict", False))
         try:
             settings = ImportSettings(**opts)
@@ -287,6 +321,13 @@ def load_project(path: str | None = None, start: str | None = None) -> Project:
             outputs[out] = (i, src)
             entries.append(Entry(i, a.get("name", a["source"]), src, out, settings, strict, v, vstrict, waiver))
     return Project(path, root, doc, entries, validate, vstrict)
+
+
+def _type_checker(err):
+    def check_type(table, key, value, types, what, entry=None):
+        if (isinstance(value, bool) and bool not in types) or not isinstance(value, types):
+            raise err(table, key, f"expected {what}, got {value!r}", entry)
+    return check_type
 
 
 def _import_options(table, where, entry, err, check_type) -> dict:

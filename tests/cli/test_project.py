@@ -291,3 +291,18 @@ def test_usd_sublayers_and_references_are_part_of_the_key(tmp_path):
     e.settings = ImportSettings(max_influences=2)
     k3 = build_stamp(e)
     assert k3["settingsSha256"] != k1["settingsSha256"]
+
+
+def test_set_overrides_the_project_file(project):
+    r = run("config", "--json", "--set", "max-influences=2", "--set", "validate.subframes=3", "--set", "up-axis=Z")
+    assert r.exit_code == 0, r.output
+    cfg = json.loads(r.stdout)
+    assert {a["import"]["max-influences"] for a in cfg["assets"]} == {2}  # the entry's own 3 too
+    assert {a["import"]["up-axis"] for a in cfg["assets"]} == {"Z"}
+    assert cfg["validate"]["subframes"] == 3
+    r = run("config", "--set", "max-influences=lots")
+    assert r.exit_code == 2 and "--set max-influences: expected an integer" in r.stderr, r.stderr
+    r = run("config", "--set", "colour=red")
+    assert r.exit_code == 2 and "--set colour: unknown key" in r.stderr, r.stderr
+    r = run("config", "--set", "nothing")
+    assert r.exit_code == 2 and "KEY=VALUE" in r.stderr, r.stderr
