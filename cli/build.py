@@ -269,9 +269,9 @@ def with_outputs(fmt: str, text: str, outputs: list) -> str:
     if fmt == "text":
         return text + "".join(f"{o['output']}: {o['status']}\n" for o in bad)
     if fmt == "github":
-        from colossus.validators.report import _gh_data, _gh_property
-        return "".join(f"::error file={_gh_property(o['output'])},title={_gh_property('colossus check')}::"
-                       f"{_gh_data(o['status'] + ' (source ' + o['source'] + ')')}\n" for o in bad) + text
+        from colossus.validators.report import github_escape_data, github_escape_property
+        return "".join(f"::error file={github_escape_property(o['output'])},title={github_escape_property('colossus check')}::"
+                       f"{github_escape_data(o['status'] + ' (source ' + o['source'] + ')')}\n" for o in bad) + text
     if fmt == "json":
         doc = json.loads(text)
         doc["outputs"] = outputs

@@ -11,7 +11,8 @@ from .findings import SEVERITY_RANK, summary_line
 from .registry import all_rules
 
 __all__ = ["FORMATS", "render", "summary_line", "summary_counts", "format_text", "format_json", "format_junit",
-           "format_sarif", "format_github", "write_atomic", "JSON_REPORT_VERSION"]
+           "format_sarif", "format_github", "github_escape_data", "github_escape_property", "write_atomic",
+           "JSON_REPORT_VERSION"]
 
 #: Version of the JSON report's shape (``"version"``; its JSON Schema: ``docs/report-schema.json``).
 #: Adding a field keeps it; removing or renaming one raises it.
@@ -279,14 +280,14 @@ def _dir_uri(folder: str) -> str:
     return uri if uri.endswith("/") else uri + "/"
 
 
-def _gh_data(text: str) -> str:
+def github_escape_data(text: str) -> str:
     """A workflow command's message, escaped as GitHub's toolkit does (``escapeData``)."""
     return str(text).replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A")
 
 
-def _gh_property(text: str) -> str:
+def github_escape_property(text: str) -> str:
     """A workflow command's property value (``escapeProperty``): also ``:`` and ``,``."""
-    return _gh_data(text).replace(":", "%3A").replace(",", "%2C")
+    return github_escape_data(text).replace(":", "%3A").replace(",", "%2C")
 
 
 #: Workflow command of each severity.
@@ -317,11 +318,11 @@ def format_github(reports, unchecked=None, base: str | None = None) -> str:
                 msg += f" [{len(fs)} findings, worst shown]"
             cmd = GITHUB_COMMAND.get(worst.severity, "warning")
             title = f"{code} {worst.rule}".strip()
-            out.append(f"::{cmd} file={_gh_property(shown)},title={_gh_property(title)}::{_gh_data(msg)}")
+            out.append(f"::{cmd} file={github_escape_property(shown)},title={github_escape_property(title)}::{github_escape_data(msg)}")
     out.append(summary_line(reports))
     if unchecked is not None:
-        out.append(f"::error title={_gh_property('colossus validate')}::"
-                   + _gh_data(f"INCOMPLETE: interrupted; {len(unchecked)} asset(s) not checked"))
+        out.append(f"::error title={github_escape_property('colossus validate')}::"
+                   + github_escape_data(f"INCOMPLETE: interrupted; {len(unchecked)} asset(s) not checked"))
     return "\n".join(out) + "\n"
 
 

@@ -334,7 +334,7 @@ def test_check_reports_stale_outputs_in_every_format(project, monkeypatch):
     root = ET.fromstring(r.stdout)
     first = root.find("testsuite")
     assert first.get("name") == "colossus check: outputs up to date" and first.get("failures") == "2"
-    from test_reports import junit_errors
+    from references.junit_schema import junit_errors
     assert junit_errors(r.stdout) == []
     r = run("check", "--format", "sarif")
     import importlib.resources

@@ -16,6 +16,7 @@ import jsonschema
 import pytest
 from click.testing import CliRunner
 
+from references.junit_schema import junit_errors
 from references.usd_fixture import open_copy, write_test_asset
 from colossus.cli.validate import validate_cmd
 from colossus.validators import report as rp
@@ -115,61 +116,14 @@ def test_github_annotations_syntax(lib):
 def test_github_escaping_follows_the_toolkit():
     """GitHub's toolkit (``@actions/core`` command.ts): data escapes ``%``, CR, LF; properties
     also ``:`` and ``,``."""
-    assert rp._gh_data("100% a\r\nb: c, d") == "100%25 a%0D%0Ab: c, d"
-    assert rp._gh_property("C:\\a,b%\n") == "C%3A\\a%2Cb%25%0A"
+    assert rp.github_escape_data("100% a\r\nb: c, d") == "100%25 a%0D%0Ab: c, d"
+    assert rp.github_escape_property("C:\\a,b%\n") == "C%3A\\a%2Cb%25%0A"
     from colossus.validators.findings import AssetReport, Finding
     rep = AssetReport("odd:name,x.usda", [Finding("COL404", "warning", "two\nlines 5%", "slack-sphere",
                                                    {"prim": "/A"})])
     line = rp.format_github([rep], base="/").splitlines()[0]
     assert GH_LINE.match(line), line
     assert "odd%3Aname%2Cx.usda" in line and line.endswith("::two%0Alines 5%25 (at prim /A)")
-
-
-# The common JUnit schema (junit-10.xsd, as Jenkins' xUnit plugin validates JUnit reports, GitLab
-# and Azure DevOps read the same shape), written out as its structure: per element the
-# attributes it allows, those it requires, and the children it allows (no schema file is vendored).
-JUNIT = {
-    "testsuites": ({"name", "time", "tests", "failures", "errors"}, set(), {"testsuite"}),
-    "testsuite": ({"name", "tests", "failures", "errors", "group", "time", "skipped", "timestamp", "hostname",
-                   "id", "package", "file", "log", "url"}, {"name", "tests", "failures", "errors"},
-                  {"testsuite", "properties", "testcase", "system-out", "system-err"}),
-    "properties": (set(), set(), {"property"}),
-    "property": ({"name", "value"}, {"name", "value"}, set()),
-    "testcase": ({"name", "time", "classname", "group"}, {"name"},
-                 {"skipped", "error", "failure", "rerunFailure", "rerunError", "flakyFailure", "flakyError",
-                  "system-out", "system-err"}),
-    "failure": ({"type", "message"}, set(), set()),
-    "error": ({"type", "message"}, set(), set()),
-    "skipped": ({"type", "message"}, set(), set()),
-    "system-out": (set(), set(), set()),
-    "system-err": (set(), set(), set()),
-}
-#: junit-10.xsd's SUREFIRE_TIME, the type of ``time`` on testsuites and testsuite
-SUREFIRE_TIME = re.compile(r"^(([0-9]{0,3},)*[0-9]{3}|[0-9]{0,3})*(\.[0-9]*)?$")
-
-
-def junit_errors(xml: str) -> list:
-    root = ET.fromstring(xml)
-    errs = []
-    if root.tag != "testsuites":
-        errs.append(f"root is {root.tag}")
-
-    def walk(el, path):
-        allowed, required, children = JUNIT.get(el.tag, (None, None, None))
-        if allowed is None:
-            errs.append(f"{path}: unknown element")
-            return
-        errs.extend(f"{path}: attribute {a!r} not allowed" for a in set(el.attrib) - allowed)
-        errs.extend(f"{path}: attribute {a!r} missing" for a in required - set(el.attrib))
-        if el.tag in ("testsuites", "testsuite") and "time" in el.attrib and not SUREFIRE_TIME.match(el.get("time")):
-            errs.append(f"{path}: time {el.get('time')!r} is not a SUREFIRE_TIME")
-        for c in el:
-            if c.tag not in children:
-                errs.append(f"{path}: child {c.tag} not allowed")
-            walk(c, f"{path}/{c.tag}")
-
-    walk(root, "/testsuites")
-    return errs
 
 
 def test_junit_keeps_to_the_common_junit_schema(lib):
