@@ -234,8 +234,10 @@ def check_cmd(config, sets, fmt, output, deep, jobs, progress):
     reports, interrupted = {}, False
     for kw, es in groups.values():
         res = check_many([e.output for e in es], jobs=jobs, progress=show, **kw)
-        for e, r in zip(es, res.reports):
-            reports[id(e)] = r
+        by_path = {os.path.abspath(r.path): r for r in res.reports}
+        for e in es:
+            if os.path.abspath(e.output) in by_path:
+                reports[id(e)] = by_path[os.path.abspath(e.output)]
         interrupted = interrupted or res.interrupted
     ordered = [reports[id(e)] for e in present if id(e) in reports]
     for r in ordered:
