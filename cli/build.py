@@ -190,10 +190,12 @@ def _size(path) -> int:
 @click.option("--deep", is_flag=True, help="Also compare each output with its source (validate --source).")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Validate in N parallel processes.")
+@click.option("--scheduler", metavar="ADDRESS",
+              help="Validate on a Dask cluster (tcp://host:8786, or local:N; needs colossus[dask]).")
 @click.option("--progress/--no-progress", default=None,
               help="Progress bar on stderr (default: when stderr is a terminal).")
 @maps_errors(input_status=2)
-def check_cmd(config, sets, fmt, output, deep, jobs, progress):
+def check_cmd(config, sets, fmt, output, deep, jobs, scheduler, progress):
     """CI gate: every [[asset]] output exists, is up to date with its source, settings and importer
     version, and passes validate with the project's rules.
 
@@ -233,7 +235,7 @@ def check_cmd(config, sets, fmt, output, deep, jobs, progress):
         groups.setdefault(key, (kw, []))[1].append(e)
     reports, interrupted = {}, False
     for kw, es in groups.values():
-        res = check_many([e.output for e in es], jobs=jobs, progress=show, **kw)
+        res = check_many([e.output for e in es], jobs=jobs, scheduler=scheduler, progress=show, **kw)
         by_path = {os.path.abspath(r.path): r for r in res.reports}
         for e in es:
             if os.path.abspath(e.output) in by_path:

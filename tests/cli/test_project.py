@@ -344,3 +344,21 @@ def test_check_reports_stale_outputs_in_every_format(project, monkeypatch):
     notes = doc["runs"][0]["invocations"][0]["toolExecutionNotifications"]
     assert sorted(n["message"]["text"].split(": ", 1)[1] for n in notes) == [
         "missing: not built (run colossus build)", "stale: source changed"]
+
+
+def test_check_deep_compares_outputs_with_their_sources(project, monkeypatch):
+    assert run("build", "limb-usd", "limb-gltf").exit_code == 0
+    (project / "colossus.toml").write_text(PROJECT.split("[[asset]]\nsource = \"src/glob")[0]
+                                           + PROJECT.split("output = \"colliders/{stem}.usdc\"\n\n")[1])
+    import colossus.validators.parallel as par
+    real, sources = par.check_many, []
+
+    def spy(paths, **kw):
+        sources.append(kw.get("source"))
+        return real(paths, **kw)
+    monkeypatch.setattr(par, "check_many", spy)
+    r = run("check", "--deep", "--format", "json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    assert len(doc["assets"]) == 2 and all(a["passed"] for a in doc["assets"])
+    assert sorted(Path(s).name for s in sources) == ["limb_b.gltf", "limb_c.usda"]  # validate --source, per entry
