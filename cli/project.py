@@ -285,10 +285,15 @@ def load_project(path: str | None = None, start: str | None = None, overrides: d
         try:
             settings = ImportSettings(**opts)
             settings.check()
-        except UsageError as e:
-            raise err("asset", None, f"{e}", i) from None
-        except TypeError as e:
-            raise err("asset", None, f"{e}", i) from None
+        except UsageError as e:  # a value out of range: name the key where it was set
+            m = re.search(r"--([a-z-]+)", str(e))
+            key = m.group(1) if m and m.group(1) in IMPORT_KEYS else None
+            msg = str(e)
+            if key is not None and key in (over.get("import") or {}):
+                raise flag_err("import", key, msg) from None
+            if key is not None and key not in a and key in imp:
+                raise err("import", key, msg) from None
+            raise err("asset", key if key in a else None, msg, i) from None
         waiver = None
         if "ignore" in a:
             reason = str(a.get("reason", "")).strip()

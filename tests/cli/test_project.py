@@ -362,3 +362,13 @@ def test_check_deep_compares_outputs_with_their_sources(project, monkeypatch):
     doc = json.loads(r.stdout)
     assert len(doc["assets"]) == 2 and all(a["passed"] for a in doc["assets"])
     assert sorted(Path(s).name for s in sources) == ["limb_b.gltf", "limb_c.usda"]  # validate --source, per entry
+
+
+@pytest.mark.parametrize("body, where", [
+    ('[import]\nup-axis = "X"\n\n[[asset]]\nsource = "src/limb_c.usda"\noutput = "o/{stem}.usda"\n', ":2: import.up-axis"),
+    ('[[asset]]\nsource = "src/limb_c.usda"\noutput = "o/{stem}.usda"\nfps = -3\n', ":4: asset[0].fps"),
+])
+def test_out_of_range_values_name_their_line(project, body, where):
+    (project / "colossus.toml").write_text(body)
+    r = run("config")
+    assert r.exit_code == 2 and where in r.stderr, r.stderr
