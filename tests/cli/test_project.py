@@ -372,3 +372,20 @@ def test_out_of_range_values_name_their_line(project, body, where):
     (project / "colossus.toml").write_text(body)
     r = run("config")
     assert r.exit_code == 2 and where in r.stderr, r.stderr
+
+
+def test_noop_build_reads_no_asset_and_an_edited_output_is_read_again(project, monkeypatch):
+    """The stamp cache: a no-op build opens no asset; an output whose stat changed is read again."""
+    assert counts(run("build")) == (3, 0, 0)
+    import colossus.cli.project as proj
+    real, opened = proj.read_stamp, []
+
+    def spy(path):
+        opened.append(Path(path).name)
+        return real(path)
+    monkeypatch.setattr(proj, "read_stamp", spy)
+    assert counts(run("build")) == (0, 3, 0) and opened == []
+    out = project / "colliders" / "limb_b.usda"
+    out.write_text(out.read_text().replace("dictionary build =", "dictionary built ="))  # no stamp: not ours
+    r = run("build")
+    assert counts(r) == (1, 2, 0) and opened == ["limb_b.usda"], (r.stdout, opened)
