@@ -9,6 +9,9 @@ command     module                          what
 =========== =============================== ======================================
 import      ``colossus.cli.import_``        an export in, a USD collider out
 validate    ``colossus.cli.validate``       CI asset checks
+build       ``colossus.cli.build``          the project file's assets, rebuilt when changed
+check       ``colossus.cli.build``          CI gate over the project file's assets
+config      ``colossus.cli.build``          the project file's resolved settings
 inspect     ``colossus.cli.inspect``        human summary of an asset
 render      ``colossus.cli.render``         picture of the collider and its spheres
 play        ``colossus.cli.play``           player sphere demo on an animated collider
@@ -30,6 +33,9 @@ from ._errors import CommandError, maps_errors, missing_extra, on_sigterm  # noq
 COMMANDS = {
     "import": ("colossus.cli.import_", "import_cmd", "Import a Blender export and write a USD collider asset."),
     "validate": ("colossus.cli.validate", "validate_cmd", "Check collider assets (CI gate)."),
+    "build": ("colossus.cli.build", "build_cmd", "Import the project file's assets whose inputs changed."),
+    "check": ("colossus.cli.build", "check_cmd", "CI gate: every project asset built, up to date and passing."),
+    "config": ("colossus.cli.build", "config_cmd", "Print the project file's resolved settings per asset."),
     "inspect": ("colossus.cli.inspect", "inspect_cmd", "Print a readable summary of a collider asset."),
     "render": ("colossus.cli.render", "render_cmd", "Render the collider and its part spheres to PNG or GIF."),
     "play": ("colossus.cli.play", "play_cmd", "Drop a player sphere on an animated collider and record it."),

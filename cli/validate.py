@@ -31,7 +31,7 @@ def _list_rules(ctx, param, value):
 
 @click.command("validate")
 @click.argument("paths", nargs=-1, type=click.Path())
-@click.option("--format", "fmt", type=click.Choice(["text", "json", "junit", "html"]), default="text", show_default=True,
+@click.option("--format", "fmt", type=click.Choice(["text", "json", "junit", "html", "sarif", "github"]), default="text", show_default=True,
               help="Report format.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True),
               help="Write the report to FILE (atomically) instead of stdout.")
@@ -62,11 +62,18 @@ def _list_rules(ctx, param, value):
 @click.option("--progress/--no-progress", default=None,
               help="Progress bar on stderr (default: when stderr is a terminal).")
 @click.option("-v", "--verbose", is_flag=True, help="Text format: list every finding, not only the worst.")
+@click.option("--strict", is_flag=True, default=False,
+              help="Warnings fail too (exit 1 when any finding is an error or a warning).")
+@click.option("--config", "config", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="Take the rule settings of this project file's [validate] table (default: colossus.toml, "
+                   "or pyproject.toml with [tool.colossus], found walking up from the working directory); "
+                   "options given on the command line win.")
+@click.option("--no-config", is_flag=True, help="Ignore any project file.")
 @click.option("--list-rules", is_flag=True, expose_value=False, is_eager=True, callback=_list_rules,
               help="Print the rule catalog and exit.")
 @maps_errors(input_status=2)
 def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, subframes, slack_ratio, max_deviation,
-                 jobs, scheduler, split_above, source, progress, verbose):
+                 jobs, scheduler, split_above, source, progress, verbose, strict, config, no_config):
     """Check collider assets: PATHS are files, directories (searched for *.usd, *.usda,
     *.usdc, *.usdz) or globs ('assets/**/*.usda').  Exit 0 all pass, 1 any error finding,
     2 a path unreadable or usage, 130 interrupted (the report so far is still written, marked
@@ -77,12 +84,30 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
 
     if not paths:
         raise click.UsageError("give at least one asset file or directory")
+    ctx = click.get_current_context()
+    given = lambda name: ctx.get_parameter_source(name) not in (click.core.ParameterSource.DEFAULT, None)  # noqa: E731
+    project = {} if no_config else _project_validate(config)
+    proj_sev = dict(project.get("severities") or {})
+    if not given("select") and project.get("select"):
+        select = tuple(project["select"])
+    if not given("ignore") and project.get("ignore"):
+        ignore = tuple(project["ignore"])
+    if not given("subframes") and "subframes" in project:
+        subframes = project["subframes"]
+    if not given("max_influences") and "max_influences" in project:
+        max_influences = project["max_influences"]
+    if not given("slack_ratio") and "slack_ratio" in project:
+        slack_ratio = project["slack_ratio"]
+    if not given("max_deviation") and "max_deviation" in project:
+        max_deviation = project["max_deviation"]
+    if not given("strict") and project.get("strict"):
+        strict = True
     sel, ign = _codes(select), _codes(ignore)
     try:
         RuleSelector(sel, ign)
     except ValueError as e:
         raise click.UsageError(str(e))
-    sev = {}
+    sev = dict(proj_sev)  # the project file's overrides, then the command line's
     for s in severity:
         code, _, level = s.partition("=")
         if level not in ("error", "warning", "info"):
@@ -129,8 +154,25 @@ def validate_cmd(paths, fmt, output, select, ignore, severity, max_influences, s
     else:
         click.echo(text, nl=False)
     unreadable = bool(missing) or any(f.code == "COL003" for r in reports for f in r.findings)
-    status = interrupted_status() if res.interrupted else 2 if unreadable else 0 if all(r.passed for r in reports) else 1
+    passed = all(r.passed and not (strict and any(f.severity == "warning" for f in r.findings)) for r in reports)
+    status = interrupted_status() if res.interrupted else 2 if unreadable else 0 if passed else 1
     click.get_current_context().exit(status)
+
+
+def _project_validate(config) -> dict:
+    """The ``[validate]`` table of the project file (``--config``, else the one found walking up
+    from the working directory; none: ``{}``) as option values, plus ``strict``.  A bad file is
+    exit 2 naming its line."""
+    from colossus.cli.project import ProjectError, find_project, load_project
+
+    path = config or find_project()
+    if path is None:
+        return {}
+    try:
+        project = load_project(path)
+    except ProjectError as e:
+        raise CommandError(str(e), 2) from None
+    return {**project.validate, **({"strict": True} if project.validate_strict else {})}
 
 
 def _check_report_path(output) -> None:

@@ -352,11 +352,14 @@ def _spheres(mesh, src):
     return out
 
 
-def import_asset(src, out, settings: ImportSettings | None = None, progress=None, strict: bool = False) -> ImportResult:
+def import_asset(src, out, settings: ImportSettings | None = None, progress=None, strict: bool = False,
+                 build: dict | None = None) -> ImportResult:
     """Import the Blender export ``src`` and write the collider asset ``out`` (atomically).
 
     ``strict``: refuse (:class:`InputError`, nothing written) when the reader met anything it
-    does not carry exactly (``--strict``; :mod:`pipeline.notcarried`).
+    does not carry exactly (``--strict``; :mod:`pipeline.notcarried`).  ``build``: the build
+    stamp of ``colossus build`` (its key and what went into it), stored in the provenance as
+    ``customData["colossus"]["build"]``.
 
     Raises
     ------
@@ -384,6 +387,8 @@ def import_asset(src, out, settings: ImportSettings | None = None, progress=None
     simp = next((r for r in reports if r.stage == "simplify"), None)
     if simp is not None:
         provenance["proxy"] = proxy_provenance(simp)
+    if build:
+        provenance["build"] = dict(build)
     mesh, rep = write(mesh, out, provenance)
     rep.seconds = time.perf_counter() - t1
     reports.append(rep)

@@ -156,7 +156,7 @@ def _section(i, r, pictures) -> str:
                    "<th>where</th></tr>")
         for f in sorted(r.findings, key=lambda f: (SEVERITY_RANK.get(f.severity, 9), f.code, -f.sort_key)):
             out.append(f'<tr><td>{_e(f.code)}</td><td class="sev-{_e(f.severity)}">{_e(f.severity)}</td>'
-                       f'<td>{_e(f.rule)}</td><td>{_e(f.message)}</td><td class="where">{_e(f.where())}</td></tr>')
+                       f'<td>{_e(f.rule)}</td><td>{_e(f.message)}</td><td class="where">{_e(" ".join(x for x in (f.where(), f"prim={f.prim_path}") if x))}</td></tr>')
         out.append("</table>")
     fpp = r.stats.get("frameproof") or {}
     items = [f"checked: {c}" for c in fpp.get("checked", [])] + [f"not checked: {c}" for c in fpp.get("not_checked", [])]

@@ -53,16 +53,23 @@ class Finding:
         raise AttributeError(name)
 
     def to_dict(self) -> dict:
-        d = {"code": self.code, "severity": self.severity, "message": self.message, "rule": self.rule}
-        for k in LOCATION_FIELDS:
+        d = {"code": self.code, "severity": self.severity, "message": self.message, "rule": self.rule,
+             "prim": self.prim_path}
+        for k in LOCATION_FIELDS[1:]:
             if k in self.location and self.location[k] is not None:
                 d[k] = self.location[k]
         return d
 
+    @property
+    def prim_path(self) -> str:
+        """The USD prim path the finding is about (``/``, the layer itself, when none applies:
+        an asset that could not be read)."""
+        return str(self.__dict__.get("location", {}).get("prim") or "/")
+
     def where(self) -> str:
-        """The location fields as ``key=value`` text."""
+        """The location fields but the prim (:attr:`prim_path`) as ``key=value`` text."""
         parts = []
-        for k in LOCATION_FIELDS:
+        for k in LOCATION_FIELDS[1:]:
             v = self.location.get(k)
             if v is None:
                 continue

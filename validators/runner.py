@@ -189,8 +189,50 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
             add("COL002", f"rule {rule.code} ({rule.name}) crashed: {type(e).__name__}: {one_line(e)} "
                           f"[{Path(tb.filename).name}:{tb.lineno}]", validator=rule.code)
     report.stats = _stats(asset, ctx, t_load, time.perf_counter() - t0)
+    locate_prims(report, asset)
     report.sort()
     return report
+
+
+#: Families whose findings are about the collision mesh (its points, faces, skin, parts, proxy,
+#: motion against the source) when the rule names no prim of its own.
+_MESH_FAMILIES = ("COL2", "COL3", "COL4", "COL6", "COL7")
+
+
+def locate_prims(report: AssetReport, asset: LoadedAsset | None) -> None:
+    """Give every finding of ``report`` a ``prim`` location (the USD prim path it is about) when
+    its rule named none: the clip's ``SkelAnimation`` for a finding about one clip, the collision
+    mesh for the mesh, skin, parts, source and proxy families (COL2-4, COL6, COL7), the
+    ``Skeleton`` for a joint, else the ``SkelRoot`` (the asset as a whole); ``/`` (the layer's
+    pseudo-root) when the asset has none of these or could not be read."""
+    clips = {}
+    if asset is not None:
+        for c in getattr(asset, "clips", None) or []:
+            try:
+                clips[c.name] = str(c.prim.GetPath())
+            except Exception:
+                pass
+
+    def path_of(prim):
+        try:
+            return str(prim.GetPath()) if prim is not None and prim.IsValid() else None
+        except Exception:
+            return None
+
+    mesh = path_of(getattr(asset, "mesh", None))
+    skel = path_of(getattr(asset, "skeleton", None))
+    root = path_of(getattr(asset, "root", None))
+    for f in report.findings:
+        if f.location.get("prim"):
+            continue
+        where = None
+        if f.location.get("clip") in clips:
+            where = clips[f.location["clip"]]
+        elif f.code.startswith(_MESH_FAMILIES):
+            where = mesh
+        elif f.location.get("joint") is not None:
+            where = skel
+        f.location["prim"] = where or root or mesh or "/"
 
 
 def unreadable_report(path, message: str, select=None, ignore=None, severities=None, **options) -> AssetReport:

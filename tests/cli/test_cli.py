@@ -15,7 +15,7 @@ from scipy.spatial import cKDTree
 from paths import SAMPLES
 
 #: Every command, in the README's order (``colossus --help`` lists every command).
-COMMANDS = ("import", "validate", "inspect", "render", "play", "bench")
+COMMANDS = ("import", "validate", "build", "check", "config", "inspect", "render", "play", "bench")
 
 
 def colossus(*args):

@@ -56,7 +56,7 @@ def test_directory_recursion_json_and_exit_1(lib):
     r = run(lib, "--format", "json")
     assert r.exit_code == 1
     data = json.loads(r.stdout)
-    assert list(data) == ["assets"]
+    assert list(data) == ["version", "tool", "summary", "assets"]
     paths = [Path(a["path"]).name for a in data["assets"]]
     assert paths == ["corrupt.usd", "good.usda", "bad.usda", "slack.usdc"]
     by = {Path(a["path"]).name: a for a in data["assets"]}
