@@ -160,10 +160,10 @@ def test_fbx_inherit_type_rrss_through_ufbx_is_carried_and_checked(tmp_path, mon
     orig = U._channels
 
     def off(r, rest_local, seconds, worlds):
-        chans, recomposed = orig(r, rest_local, seconds, worlds)
+        chans, recomposed, trs = orig(r, rest_local, seconds, worlds)
         recomposed = recomposed.copy()
         recomposed[:, :, :3, :3] *= 1.01
-        return chans, recomposed
+        return chans, recomposed, trs
 
     monkeypatch.setattr(U, "_channels", off)
     items = _items(bad[0])
