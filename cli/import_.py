@@ -45,7 +45,8 @@ def _stage_line(rep) -> str:
     if s == "parts":
         return f"{c['parts']} parts ({c['mode']}), {len(c.get('folded_joints', []))} joints folded"
     if s == "quantize":
-        k = f", root scale x{c['root_scale']:.6g} onto the Skeleton" if abs(c["root_scale"] - 1.0) > 1e-6 else ""
+        k = (f", root scale x{c['root_scale']:.6g} folded into the translations"
+             if abs(c["root_scale"] - 1.0) > 1e-6 else "")
         return (f"{c['clips']} clips as stored (float3, quatf, half3){k}; moves a vertex "
                 f"<= {c['storage_error_relative']:.2g} x size")
     if s == "spheres":

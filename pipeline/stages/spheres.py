@@ -202,15 +202,10 @@ def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
     if not mesh.clips or P == 0:
         return need
     voff, verts = part_vertex_csr(mesh.triangles, parts_in.face_offsets, parts_in.faces, mesh.vertex_count)
-    # the rig exactly as the writer lays it out: the roots' common scale k on the Skeleton prim
-    k = mesh.root_scale
-    roots = mesh.parents < 0
-    unscale = np.diag([1.0 / k, 1.0 / k, 1.0 / k, 1.0])
-    rest = mesh.rest_transforms.copy()
-    rest[roots] = unscale @ rest[roots]
-    rig = certify.Rig(mesh.positions, mesh.joint_indices, mesh.joint_weights, unscale @ mesh.geom_bind,
-                      unscale @ mesh.bind_transforms, rest, mesh.parents, np.asarray(parts_in.joints),
-                      centers.astype(np.float64), target, voff, verts, world=np.diag([k, k, k, 1.0]))
+    # the rig exactly as the writer lays it out (the roots' scale folded by quantize)
+    rig = certify.Rig(mesh.positions, mesh.joint_indices, mesh.joint_weights, mesh.geom_bind,
+                      mesh.bind_transforms, mesh.rest_transforms, mesh.parents, np.asarray(parts_in.joints),
+                      centers.astype(np.float64), target, voff, verts)
     start = 1  # pose 0 is the bind pose
     for clip, stored in zip(mesh.clips, mesh.stored_clips, strict=True):
         n = clip.frame_count

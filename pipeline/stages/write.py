@@ -125,18 +125,12 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         jpaths = joint_paths(mesh.joint_names, mesh.parents)
         skel.CreateJointsAttr(Vt.TokenArray(jpaths))
         skel.CreateJointNamesAttr(Vt.TokenArray(list(mesh.joint_names)))
-        # the roots' common scale goes onto the Skeleton prim in double precision
-        # (quantize.root_scale: the stored clips have it taken out already)
-        k = mesh.root_scale
-        roots = mesh.parents < 0
-        unscale = np.diag([1.0 / k, 1.0 / k, 1.0 / k, 1.0])
-        bind_k = unscale @ mesh.bind_transforms
-        rest_k = mesh.rest_transforms.copy()
-        rest_k[roots] = unscale @ rest_k[roots]
-        if k != 1.0:
-            UsdGeom.Xformable(skel.GetPrim()).AddScaleOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(k, k, k))
-        skel.CreateBindTransformsAttr(schema.matrices_to_usd(bind_k))
-        skel.CreateRestTransformsAttr(schema.matrices_to_usd(rest_k))
+        # no unit scale on the Skeleton prim: quantize folded the roots' common scale into the
+        # translations (quantize.fold_root_scale)
+        if mesh.root_scale != 1.0:
+            raise ValueError("write: the roots' scale is not folded (run the quantize stage first)")
+        skel.CreateBindTransformsAttr(schema.matrices_to_usd(mesh.bind_transforms))
+        skel.CreateRestTransformsAttr(schema.matrices_to_usd(mesh.rest_transforms))
 
         # -- clips ---------------------------------------------------------------------------
         taken = set(RESERVED)
@@ -178,9 +172,8 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         k = mesh.joint_indices.shape[1]
         binding.CreateJointIndicesPrimvar(False, k).Set(Vt.IntArray.FromNumpy(mesh.joint_indices.reshape(-1).astype(np.int32)))
         binding.CreateJointWeightsPrimvar(False, k).Set(Vt.FloatArray.FromNumpy(mesh.joint_weights.reshape(-1).astype(np.float32)))
-        geom_bind = unscale @ mesh.geom_bind  # points stay where they are; skeleton space is scaled by k
-        if not np.allclose(geom_bind, np.eye(4), rtol=0, atol=1e-12):
-            binding.CreateGeomBindTransformAttr(schema.matrices_to_usd(geom_bind))
+        if not np.allclose(mesh.geom_bind, np.eye(4), rtol=0, atol=1e-12):
+            binding.CreateGeomBindTransformAttr(schema.matrices_to_usd(mesh.geom_bind))
         UsdPhysics.CollisionAPI.Apply(geo.GetPrim())
         UsdPhysics.MeshCollisionAPI.Apply(geo.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.none)
 
