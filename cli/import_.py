@@ -36,6 +36,11 @@ def _stage_line(rep) -> str:
                 f"{c['meters_per_unit']:g} m/unit (x{c['scale_applied']:g})")
     if s == "weld":
         return f"{c['vertices_in']} -> {c['vertices_out']} vertices ({c['merged']} merged, {c['weight_conflicts']} weight conflicts)"
+    if s == "degenerate":
+        again = (f", {c['dropped_after_simplify']} more from the proxy"
+                 if c.get("dropped_after_simplify") else "")
+        return (f"{c['dropped']} zero-area triangles dropped{again} ({c['repeated_index']} with a repeated "
+                f"vertex; area <= {c['area_threshold']:.2g}), {c['faces_out']} left")
     if s == "orient":
         return (f"{c['faces_flipped']} faces flipped, {c['shells']} shells ({c['closed_shells']} closed), "
                 f"{c['nonmanifold_edges']} non-manifold edges")
@@ -61,12 +66,13 @@ def _stage_line(rep) -> str:
 def format_summary(result) -> str:
     s = result.summary()
     lines = [f"colossus import {s['source']} -> {s['output']}", ""]
-    lines.append(f"  {'stage':<8} {'seconds':>8}  what it did")
+    lines.append(f"  {'stage':<10} {'seconds':>8}  what it did")
     for rep in result.reports:
-        lines.append(f"  {rep.stage:<8} {rep.seconds:8.3f}  {_stage_line(rep)}")
-    lines.append(f"  {'total':<8} {s['seconds']:8.3f}")
+        lines.append(f"  {rep.stage:<10} {rep.seconds:8.3f}  {_stage_line(rep)}")
+    lines.append(f"  {'total':<10} {s['seconds']:8.3f}")
     lines.append("")
-    lines.append(f"  vertices {s['vertices_in']} in, {s['vertices_out']} out | faces flipped {s['faces_flipped']} | "
+    lines.append(f"  vertices {s['vertices_in']} in, {s['vertices_out']} out | zero-area triangles dropped "
+                 f"{s['degenerate_dropped']} | faces flipped {s['faces_flipped']} | "
                  f"influences dropped {s['influences_dropped']} | parts {s['parts']} | clips {s['clips']} | frames {s['frames']}")
     lines += _source_lines(next(r for r in result.reports if r.stage == "read"), result.mesh)
     sph = next(r for r in result.reports if r.stage == "spheres")
@@ -195,7 +201,7 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
     """Import the Blender export SRC and write the collider asset OUT.
 
     \b
-    Stages: read, bake, weld, orient, bind, [simplify], parts, spheres, write.
+    Stages: read, bake, weld, degenerate, orient, bind, [simplify], parts, quantize, spheres, write.
     Exit status: 0 written; 1 the input is unusable, or with --strict holds something
     not carried exactly (nothing written); 2 usage, or an output that cannot be written.
 
