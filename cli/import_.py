@@ -14,6 +14,33 @@ from colossus.pipeline.tolerances import PARTS_ANY_THRESHOLD
 
 LARGE_INPUT_BYTES = 4 * 2**20  # show a progress bar from this input size on (when stderr is a terminal)
 
+#: Error rules the import does not rerun on the asset it writes: the frame proof (COL403 holds on
+#: all frames, COL407 holds between frames), the most expensive checks, which the ``spheres``
+#: stage has already made on the clips exactly as stored, with the same certificate
+#: (``runtime.certify.continuous``); and the ``--source`` family (COL6xx), which needs the source.
+NOT_RERUN = ("COL403", "COL407", "COL6")
+
+
+def error_rules(path) -> str | None:
+    """The validator's error rules on the asset ``import`` has just written to the temporary file
+    ``path``, before its rename (``pipeline.stages.write.write``'s ``check``): None when none fails,
+    else ``"<code>: <message>"`` of the first error finding (``(+N more)`` when there are others),
+    which refuses the import.  Every error-severity rule runs but :data:`NOT_RERUN`: the
+    structure (COL0xx, COL1xx), mesh (COL201-COL204, COL208, COL209), skin (COL3xx), parts
+    (COL401, COL402, COL405), animation (COL5xx) and proxy (COL701) errors.  A module-level
+    function, so that a batch import's worker processes receive it by name."""
+    from colossus.validators.registry import all_rules
+    from colossus.validators.runner import check_asset
+
+    codes = [r.code for r in all_rules() if r.severity == "error" and not r.code.startswith(NOT_RERUN)]
+    report = check_asset(path, select=codes)
+    errors = [f for f in report.findings if f.severity == "error"]
+    if not errors:
+        return None
+    first = errors[0]
+    more = f" (+{len(errors) - 1} more)" if len(errors) > 1 else ""
+    return f"{first.code}: {first.message}{more}"
+
 
 def _num(value, spec: str) -> str:
     """``format(value, spec)``, or ``n/a`` for a figure a degenerate input leaves undefined
@@ -203,7 +230,9 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
     \b
     Stages: read, bake, weld, degenerate, orient, bind, [simplify], parts, quantize, spheres, write.
     Exit status: 0 written; 1 the input is unusable, or with --strict holds something
-    not carried exactly (nothing written); 2 usage, or an output that cannot be written.
+    not carried exactly, or the asset made of it would fail one of the validator's error
+    rules (checked before it is renamed into place; nothing written); 2 usage, or an output
+    that cannot be written.
 
     \b
     Several inputs (SRC..., directories, globs): -o is a directory and each input becomes
@@ -248,7 +277,7 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
         line = f"importing [{'#' * done}{'-' * (24 - done)}] {i}/{n} {name}"
         click.echo(("\r" + line.ljust(60)) if tty else line, err=True, nl=not tty)
 
-    result = import_asset(src, out, settings, progress=on_stage, strict=strict)
+    result = import_asset(src, out, settings, progress=on_stage, strict=strict, check=error_rules)
     n = len(settings.stages())
     on_stage(n, n, "done")
     if progress and tty:
@@ -270,7 +299,7 @@ def _import_many(srcs, out, settings, as_json, progress, jobs, scheduler, strict
     show = sys.stderr.isatty() if progress is None else progress
     try:
         rows, interrupted = import_many(srcs, out, settings, jobs=jobs, scheduler=scheduler, progress=show,
-                                        strict=strict)
+                                        strict=strict, check=error_rules)
     except OSError as exc:
         raise OutputError(f"-o {out}: {exc.strerror or exc}") from None
     if as_json:
