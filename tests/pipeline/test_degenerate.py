@@ -32,9 +32,12 @@ def colossus(*args):
     return CliRunner().invoke(main, [str(a) for a in args], prog_name="colossus")
 
 
-def glb_with_triangles(tmp_path, name, extra):
+def glb_with_triangles(tmp_path, name, extra, copies=()):
     """The benchmark tube (bench.synth.write_glb) as a real .glb, with the triangles ``extra``
-    (k, 3) appended to its index accessor (a new buffer view at the end of the BIN chunk)."""
+    (k, 3) appended to its index accessor, after new vertices ``copies``: ``(vertex, joints (4,),
+    weights (4,))`` each, a vertex at the position of ``vertex`` with those influences (numbered
+    from the tube's vertex count on).  Every accessor that grows is rewritten at the end of the BIN
+    chunk."""
     from fuzz.mutators import glb_join, glb_split
 
     pos, _ = tube(600)
@@ -45,18 +48,37 @@ def glb_with_triangles(tmp_path, name, extra):
     plain.unlink()
     binary = bytearray(chunks[1][1])
     prim = doc["meshes"][0]["primitives"][0]
-    acc = doc["accessors"][prim["indices"]]
-    view = doc["bufferViews"][acc["bufferView"]]
-    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-    old = np.frombuffer(bytes(binary[start:start + 4 * acc["count"]]), dtype=np.uint32)
-    assert acc["componentType"] == 5125 and (old < len(old)).all()
-    idx = np.concatenate([old, np.asarray(extra, dtype=np.uint32).ravel()])
-    binary += b"\0" * (-len(binary) % 4)
-    doc["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": idx.nbytes, "target": 34963})
-    binary += idx.tobytes()
-    doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5125,
-                             "count": int(len(idx)), "type": "SCALAR"})
-    prim["indices"] = len(doc["accessors"]) - 1
+
+    def read(i, dtype, width):
+        acc = doc["accessors"][i]
+        view = doc["bufferViews"][acc["bufferView"]]
+        start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+        n = acc["count"] * width * np.dtype(dtype).itemsize
+        return np.frombuffer(bytes(binary[start:start + n]), dtype=dtype).reshape(acc["count"], width)
+
+    def append(i, rows, target):
+        nonlocal binary
+        acc = dict(doc["accessors"][i])
+        data = np.vstack([read(i, rows.dtype, rows.shape[1]), rows])
+        binary += b"\0" * (-len(binary) % 4)
+        doc["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": data.nbytes,
+                                   "target": target})
+        binary += data.tobytes()
+        acc.update(bufferView=len(doc["bufferViews"]) - 1, count=int(len(data)))
+        acc.pop("byteOffset", None)
+        if "min" in acc:
+            acc["min"], acc["max"] = data.min(0).tolist(), data.max(0).tolist()
+        doc["accessors"].append(acc)
+        return len(doc["accessors"]) - 1
+
+    attrs = prim["attributes"]
+    if copies:
+        p = read(attrs["POSITION"], np.float32, 3)
+        attrs["POSITION"] = append(attrs["POSITION"], p[[c[0] for c in copies]], 34962)
+        attrs["JOINTS_0"] = append(attrs["JOINTS_0"], np.array([c[1] for c in copies], np.uint16), 34962)
+        attrs["WEIGHTS_0"] = append(attrs["WEIGHTS_0"], np.array([c[2] for c in copies], np.float32), 34962)
+    assert doc["accessors"][prim["indices"]]["componentType"] == 5125
+    prim["indices"] = append(prim["indices"], np.asarray(extra, dtype=np.uint32).reshape(-1, 1), 34963)
     doc["buffers"][0]["byteLength"] = len(binary)
     chunks[0] = (chunks[0][0], json.dumps(doc).encode())
     chunks[1] = (chunks[1][0], bytes(binary))
@@ -70,6 +92,11 @@ def glb_with_triangles(tmp_path, name, extra):
 COLLINEAR = [(0 * SEG + 0, 1 * SEG + 0, 2 * SEG + 0), (3 * SEG + 5, 4 * SEG + 5, 5 * SEG + 5)]
 
 
+#: Vertex 299 (the tube has 299): at vertex 40's position but bound to joint 3 alone (vertex 40
+#: is not): weld keeps the two apart, so the triangle (40, 299, 41) keeps zero area after it.
+COINCIDENT = [(40, (3, 0, 0, 0), (1.0, 0.0, 0.0, 0.0))]
+
+
 def test_zero_area_glb_imports_counted_and_validates_clean(tmp_path):
     src = glb_with_triangles(tmp_path, "slivers.glb", COLLINEAR)
     out = tmp_path / "slivers.usda"
@@ -81,7 +108,7 @@ def test_zero_area_glb_imports_counted_and_validates_clean(tmp_path):
     assert s["stages"]["degenerate"]["counts"]["dropped"] == 2
     assert s["stages"]["degenerate"]["counts"]["repeated_index"] == 0
     assert s["faces_in"] == s["faces_out"] + 2
-    v = colossus("validate", out)
+    v = colossus("validate", out, "--source", src)
     assert v.exit_code == 0, v.output
     assert v.stdout.splitlines()[0] == f"{out}: PASS (0 errors, 0 warnings)"
     # the text summary says it too
@@ -149,6 +176,29 @@ def test_batch_import_refuses_too(tmp_path, monkeypatch):
     line = next(ln for ln in r.stderr.splitlines() if ln.startswith(f"error: {src}: "))
     assert "COL204: 2 triangles have zero area" in line, r.stderr
     assert os.listdir(out_dir) == []
+
+
+def test_corners_weld_keeps_apart(tmp_path):
+    """Two corners at one position with different skin weights (weld keeps them apart, rightly)
+    make a zero-area triangle after weld; a triangle naming one vertex twice is weld's own
+    (``degenerate_faces_removed``).  The stage drops the first; the asset validates."""
+    import colossus.pipeline.run as run
+
+    assert run.STAGES.index("degenerate") == run.STAGES.index("weld") + 1
+    src = glb_with_triangles(tmp_path, "seam.glb", [(40, 299, 41), (7, 7, 8)], copies=COINCIDENT)
+    out = tmp_path / "seam.usda"
+    r = colossus("import", src, "-o", out, "--json")
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)
+    assert s["vertices_in"] == 300 and s["faces_in"] == 596
+    assert s["stages"]["weld"]["counts"]["degenerate_faces_removed"] == 1
+    assert s["stages"]["weld"]["counts"]["weight_conflicts"] >= 1
+    assert s["degenerate_dropped"] == 1 and s["faces_out"] == 594
+    # the vertex only the dropped triangle used stays, unused (COL205 is a warning), as weld does
+    assert s["stages"]["degenerate"]["counts"]["vertices_unreferenced"] == 1
+    v = colossus("validate", out)
+    assert v.exit_code == 0, v.output
+    assert "COL205" in v.stdout and "COL204" not in v.stdout
 
 
 # ---- the stage against the rule, in memory ------------------------------------------------
