@@ -119,6 +119,22 @@ def test_zero_area_glb_imports_counted_and_validates_clean(tmp_path):
     assert "zero-area triangles dropped 2" in r.stdout
 
 
+def test_proxy_is_tested_again(tmp_path):
+    """A simplified proxy (its collapses move vertices) gets the test again: counted apart
+    (``dropped_after_simplify``), and the proxy validates."""
+    src = glb_with_triangles(tmp_path, "slivers.glb", COLLINEAR)
+    out = tmp_path / "proxy.usda"
+    r = colossus("import", src, "-o", out, "--target-faces", "300", "--json")
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)
+    counts = s["stages"]["degenerate"]["counts"]
+    assert counts["dropped"] == 2 and counts["dropped_after_simplify"] >= 0
+    assert s["degenerate_dropped"] == 2 + counts["dropped_after_simplify"]
+    assert s["faces_out"] <= 300
+    v = colossus("validate", out)
+    assert v.exit_code == 0, v.output
+
+
 def test_without_the_stage_the_asset_is_refused_before_the_rename(tmp_path, monkeypatch):
     """The same file with the stage switched off: the written asset fails COL204, so the import
     is refused by the check on the temporary file: exit 1, one line naming the rule, no output
