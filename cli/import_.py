@@ -21,19 +21,22 @@ LARGE_INPUT_BYTES = 4 * 2**20  # show a progress bar from this input size on (wh
 NOT_RERUN = ("COL403", "COL407", "COL6")
 
 
-def error_rules(path) -> str | None:
+def error_rules(path, settings) -> str | None:
     """The validator's error rules on the asset ``import`` has just written to the temporary file
-    ``path``, before its rename (``pipeline.stages.write.write``'s ``check``): None when none fails,
-    else ``"<code>: <message>"`` of the first error finding (``(+N more)`` when there are others),
-    which refuses the import.  Every error-severity rule runs but :data:`NOT_RERUN`: the
-    structure (COL0xx, COL1xx), mesh (COL201-COL204, COL208, COL209), skin (COL3xx), parts
-    (COL401, COL402, COL405), animation (COL5xx) and proxy (COL701) errors.  A module-level
-    function, so that a batch import's worker processes receive it by name."""
+    ``path``, before its rename (``pipeline.run.import_asset``'s ``check``), with the options the
+    import's ``settings`` imply (``--max-influences`` for COL301, ``--max-deviation`` for COL701, as
+    ``colossus validate`` takes them): None when none fails, else ``"<code>: <message>"`` of the
+    first error finding (``(+N more)`` when there are others), which refuses the import.  Every
+    error-severity rule runs but :data:`NOT_RERUN`: the structure (COL0xx, COL1xx), mesh
+    (COL201-COL204, COL208, COL209), skin (COL3xx), parts (COL401, COL402, COL405), animation
+    (COL5xx) and proxy (COL701) errors.  A module-level function, so that a batch import's worker
+    processes receive it by name."""
     from colossus.validators.registry import all_rules
     from colossus.validators.runner import check_asset
 
     codes = [r.code for r in all_rules() if r.severity == "error" and not r.code.startswith(NOT_RERUN)]
-    report = check_asset(path, select=codes)
+    report = check_asset(path, select=codes, max_influences=settings.max_influences,
+                         max_deviation=settings.max_deviation or None)
     errors = [f for f in report.findings if f.severity == "error"]
     if not errors:
         return None

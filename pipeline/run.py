@@ -376,10 +376,11 @@ def import_asset(src, out, settings: ImportSettings | None = None, progress=None
     """Import the Blender export ``src`` and write the collider asset ``out`` (atomically).
 
     ``strict``: refuse (:class:`InputError`, nothing written) when the reader met anything it
-    does not carry exactly (``--strict``; :mod:`pipeline.notcarried`).  ``check(path) -> None |
-    str``: run on the written file before its rename (:func:`pipeline.stages.write.write`); a
-    string refuses the asset (:class:`InputError` ``"<src>: <string>"``, nothing written).  The
-    command line passes the validator's error rules (``cli.import_.error_rules``).
+    does not carry exactly (``--strict``; :mod:`pipeline.notcarried`).  ``check(path, settings)
+    -> None | str``: run on the written file before its rename (:func:`pipeline.stages.write.write`)
+    with this import's :class:`ImportSettings`; a string refuses the asset (:class:`InputError`
+    ``"<src>: <string>"``, nothing written).  The command line passes the validator's error rules
+    (``cli.import_.error_rules``).
 
     Raises
     ------
@@ -407,7 +408,7 @@ def import_asset(src, out, settings: ImportSettings | None = None, progress=None
     simp = next((r for r in reports if r.stage == "simplify"), None)
     if simp is not None:
         provenance["proxy"] = proxy_provenance(simp)
-    mesh, rep = write(mesh, out, provenance, check=check)
+    mesh, rep = write(mesh, out, provenance, check=None if check is None else (lambda path: check(path, s)))
     rep.seconds = time.perf_counter() - t1
     reports.append(rep)
     return ImportResult(mesh, reports, time.perf_counter() - t0, os.fspath(out))

@@ -135,6 +135,20 @@ def test_proxy_is_tested_again(tmp_path):
     assert v.exit_code == 0, v.output
 
 
+@pytest.mark.parametrize("option", [("--max-influences", "8"), ("--max-deviation", "2%")])
+def test_check_takes_the_import_options(tmp_path, option):
+    """The rules run with the options the import implies, as `validate` takes them: eight
+    influences are the asset's elementSize (COL301 with the default 4 would refuse every such
+    import); a proxy's stored deviation is held to --max-deviation (COL701)."""
+    from paths import SAMPLES
+
+    out = tmp_path / "limb.usda"
+    r = colossus("import", SAMPLES / "limb.glb", "-o", out, *option)
+    assert r.exit_code == 0, r.output
+    v = colossus("validate", out, *option)
+    assert v.exit_code == 0, v.output
+
+
 def test_without_the_stage_the_asset_is_refused_before_the_rename(tmp_path, monkeypatch):
     """The same file with the stage switched off: the written asset fails COL204, so the import
     is refused by the check on the temporary file: exit 1, one line naming the rule, no output
