@@ -255,12 +255,7 @@ class LoadedAsset:
         """Diagonal of the bind-pose bounding box (1.0 when empty or degenerate)."""
         if self.points is None or len(self.points) == 0:
             return 1.0
-        p = self.bind_points
-        p = p[np.all(np.isfinite(p), axis=1)]
-        if len(p) == 0:
-            return 1.0
-        d = float(np.linalg.norm(p.max(0) - p.min(0)))
-        return d if d > 0 and np.isfinite(d) else 1.0
+        return schema.bind_model_size(self.bind_points)  # the importer's degenerate stage uses it too
 
     @cached_property
     def joint_index(self) -> dict:

@@ -12,19 +12,22 @@ Layout (``<Name>`` is the source file's stem made a valid identifier)::
     /<Name>/<clip>          SkelAnimation per clip, one time sample per source frame
 
 The file is written to a temporary name in the output directory, re-opened with usd-core and
-checked (:func:`_check_written`), and only then renamed into place: a failed import never leaves
-a partial asset behind, and nothing usd-core cannot open is ever written.
+checked (:func:`_check_written`), then handed to the caller's ``check`` (the command line runs the
+validator's error rules on it: the pipeline, a floor below the validators, cannot import them), and
+only then renamed into place: a failed import never leaves a partial asset behind, nothing usd-core
+cannot open is ever written, and nothing the caller's check refuses either.
 """
 
 from __future__ import annotations
 
 import os
+import time
 
 import numpy as np
 
 from colossus.runtime import schema
 
-from ..errors import OutputError
+from ..errors import InputError, OutputError
 from ..tempfiles import clean_stale, temp_path
 from ..model import SkinnedMesh
 from . import StageReport
@@ -71,7 +74,7 @@ def check_output_path(out_path) -> str:
     return out
 
 
-def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
+def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None, check=None):
     """Write ``mesh`` (baked, welded, oriented, bound, with parts and spheres) as a USD asset.
 
     Parameters
@@ -83,6 +86,11 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
     provenance : dict, optional
         Stored in the collider mesh's ``customData["colossus"]`` (source, sourceSha256,
         importer, settings).
+    check : callable, optional
+        ``check(path) -> None | str`` run on the temporary file, fully written and re-opened,
+        before the rename: a string is the one-line reason to refuse the asset (the command line
+        passes the validator's error rules: ``"COL204: 2 triangles have zero area ..."``), raised as
+        :class:`InputError` naming the source, with nothing written.
 
     Returns
     -------
@@ -187,6 +195,13 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         stage.GetRootLayer().Save()
         del stage
         _check_written(tmp, out, root_path, tcps)
+        checked = None
+        if check is not None:
+            t_check = time.perf_counter()
+            refusal = check(tmp)
+            checked = time.perf_counter() - t_check
+            if refusal:
+                raise InputError(mesh.source.get("path") or mesh.source.get("file") or out, refusal)
         os.replace(tmp, out)
     except OSError as exc:
         _unlink(tmp)
@@ -198,8 +213,10 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         _unlink(tmp)
         raise
     size = os.path.getsize(out)
-    return mesh, StageReport("write", counts={"path": out, "bytes": size, "clips": len(mesh.clips),
-                                              "joints": mesh.joint_count, "parts": len(parts)})
+    counts = {"path": out, "bytes": size, "clips": len(mesh.clips), "joints": mesh.joint_count, "parts": len(parts)}
+    if checked is not None:
+        counts["check_seconds"] = checked
+    return mesh, StageReport("write", counts=counts)
 
 
 def _clip_source(info: dict, mesh: SkinnedMesh) -> dict:
