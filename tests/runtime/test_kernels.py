@@ -362,3 +362,73 @@ def test_pareto_set_keeps_every_maximiser():
         e = rng.random(4)
         val = e[0] * d + w @ e[1:]
         assert val[keep].max() == pytest.approx(val.max())
+
+
+# -- the continuous certificate's levels B and C, batched (runtime.kernels.subdivide) ----------
+def test_chord_nodes_equals_chord_tasks():
+    """The batched per-vertex chord bound (one kernel over all nodes, J-space transforms built in
+    the kernel from skeleton and skinning transforms) against the numpy reference
+    ``interval.chord_tasks`` on the same nodes, and against its definition by brute force."""
+    from colossus.runtime.kernels import subdivide as SD
+    rng = np.random.default_rng(31)
+    rig, clip, skel = random_rig(rng, scale=True)
+    I = len(clip.times) - 1
+    ibg = rig.inv_bind @ rig.geom_bind
+    ts = np.r_[clip.times, clip.times[:-1] + 0.37, clip.times[:-1] + 0.5]
+    sk, skin = SD.pose_at(clip, ts, rig.rest_local, rig.parents, rig.topo, ibg)
+    np.testing.assert_allclose(skin, sk @ ibg, rtol=0, atol=1e-12)
+    N = 40
+    part = rng.integers(0, rig.P, N)
+    ta, tb = rng.integers(0, len(ts), N), rng.integers(0, len(ts), N)
+    row = rng.integers(0, 7, N)
+    scale = rng.random(N)
+    drow = rng.random((7, len(rig.bind))) * 0.1
+    prow = rng.random((7, len(rig.bind))) * 0.01
+    bd = rig.bounds
+    got = SD.chord_nodes(rig.points, rig.joint_indices, rig.joint_weights, rig.vert_offsets, rig.verts,
+                         bd.part_joint, bd.pj_offsets, bd.pj_joint, bd.part_centers, sk, skin, part, ta, tb, row,
+                         scale, drow, prow)
+    # the reference: J-space folded transforms per (time, part joint), one task per node
+    mats = np.stack([rig.joint_space_mats(sk[[ta[n], tb[n]]], rig.part_joint[part[n]]) for n in range(N)])
+    mats = mats.reshape(2 * N, len(rig.bind), 12)
+    want = IV.chord_tasks(rig.points, rig.joint_indices, rig.joint_weights, mats, rig.vert_offsets, rig.verts,
+                          bd.part_centers, part, 2 * np.arange(N), 2 * np.arange(N) + 1, row, scale, drow, prow)
+    for g, w in zip(got, want):
+        np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-12)
+    # by definition: every vertex at both ends, its weighted deviation, the largest sum
+    for n in range(N):
+        vs = rig.verts[rig.vert_offsets[part[n]]:rig.vert_offsets[part[n] + 1]]
+        J = rig.part_joint[part[n]]
+        ends = [naive.naive_lbs(rig.points[vs], rig.joint_indices[vs], rig.joint_weights[vs],
+                                (np.linalg.inv(sk[t, J]) @ sk[t] @ ibg)[None])[0] for t in (ta[n], tb[n])]
+        d = [np.linalg.norm(e - rig.part_centers[part[n]], axis=1) for e in ends]
+        x = scale[n] * drow[row[n]] + prow[row[n]]
+        dev = (np.abs(rig.joint_weights[vs]) * x[rig.joint_indices[vs]]).sum(1)
+        u = (np.maximum(d[0], d[1]) + dev).max()
+        assert u <= got[0][n] <= u * (1 + 3e-12)  # the bound, padded by ROUND, and no more
+        assert got[2][n] == pytest.approx(d[0].max(), rel=1e-12) and got[4][n] == pytest.approx(d[1].max(), rel=1e-12)
+
+
+@pytest.mark.parametrize("seed,scale,growth", [(0, False, False), (1, False, True), (2, True, False),
+                                               (4, True, True), (5, False, False)])
+def test_batched_refine_decides_as_the_reference(seed, scale, growth, monkeypatch):
+    """Levels B and C batched (``certify.BATCHED``) against the reference loop: the same status
+    of every (interval, part), the same subdivisions and failures, the same bounds to rounding."""
+    rng = np.random.default_rng(seed)
+    rig, clip, skel = random_rig(rng, scale=scale, tight=True)
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    ok = ~(s.bound > s.spheres[..., 3] * (1 + 1e-6))
+    kw = dict(growth=True, max_depth=5, rho=rig.part_radii * 0.98) if growth else {}
+    res = {}
+    for batched in (False, True):
+        monkeypatch.setattr(C, "BATCHED", batched)
+        res[batched] = C.continuous(rig, clip, clip.times, s.bound, ok, 0.0, 1e-6, **kw)
+    a, b = res[False], res[True]
+    assert a.subdivided > 0
+    np.testing.assert_array_equal(a.status, b.status)
+    assert a.subdivided == b.subdivided
+    np.testing.assert_allclose(b.bound, a.bound, rtol=1e-12)
+    assert [(f["interval"], f["part"], f["definite"], f["vertex"]) for f in a.failures] == \
+        [(f["interval"], f["part"], f["definite"], f["vertex"]) for f in b.failures]
+    for f, g in zip(a.failures, b.failures):
+        assert f["excess"] == pytest.approx(g["excess"], rel=1e-9, abs=1e-12)
