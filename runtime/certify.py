@@ -20,6 +20,7 @@ import numpy as np
 from . import kernels as B  # the bounds: at a pose (kernels.bounds) and between samples (kernels.interval)
 from .kernels import pose as PK
 from .kernels import skin as SK
+from .kernels import farthest as FA
 from .kernels import subdivide as SD
 from .schema import parents_first
 
@@ -31,6 +32,11 @@ FAIL_SAMPLES = 16
 #: subdivision level over every open node); False: the reference loop (:func:`_refine`, one
 #: numpy call per node, kept as the benchmark's baseline and the tests' reference).
 BATCHED = True
+#: The sampled proof's exact tier by the chunk search (:func:`runtime.kernels.farthest.farthest`:
+#: chunk bounds first, then exact skinning of the chunks that can hold the farthest vertex,
+#: threaded); False: every vertex of the part (:func:`runtime.kernels.skin.part_farthest`, the
+#: reference and the benchmark's baseline).  The same distances and vertices either way.
+CHUNKED = True
 #: :func:`_refine_batched` computes the joint transforms of at most about this many bytes of
 #: times at once (the nodes of a level are processed in chunks).
 BATCH_BYTES = 16 << 20
@@ -86,6 +92,16 @@ class Rig:
                                        self.bind, self.part_joint, self.part_centers, self.part_radii,
                                        self.vert_offsets, self.verts)
         self._paths = None
+        self._chunks = None
+        self._ibg = None
+
+    @property
+    def chunks(self):
+        """The parts' vertex chunks of the exact tier (:func:`runtime.kernels.farthest.chunk_data`)."""
+        if self._chunks is None:
+            self._chunks = FA.chunk_data(self.points, self.joint_indices, self.joint_weights, self.vert_offsets,
+                                         self.verts)
+        return self._chunks
 
     @property
     def P(self) -> int:
@@ -165,8 +181,12 @@ def sampled(rig: Rig, skel, tol_abs: float, tol_rel: float, exact=None) -> Sampl
     todo = tier == 2
     if exact is not None:
         todo = todo | exact
-    d, v = SK.part_farthest(rig.points, rig.joint_indices, rig.joint_weights, rig.skin_mats(skel),
-                            rig.vert_offsets, rig.verts, sph[..., :3], todo=todo)
+    if CHUNKED:
+        d, v, _ = FA.farthest(rig.points, rig.joint_indices, rig.joint_weights, rig.skin_mats(skel), rig.vert_offsets,
+                              rig.verts, rig.part_joint, sph[..., :3], todo, rig.chunks)
+    else:
+        d, v = SK.part_farthest(rig.points, rig.joint_indices, rig.joint_weights, rig.skin_mats(skel),
+                                rig.vert_offsets, rig.verts, sph[..., :3], todo=todo)
     bound = np.where(todo, d, np.minimum(kb, db))
     return Sampled(tier, bound, d, v, sph)
 
@@ -509,7 +529,7 @@ def _refine_batched(rig, clip, times, fac, delta, pert, own, pair_part, todo, ou
     once per rig."""
     bd = rig.bounds
     P = rig.P
-    if getattr(rig, "_ibg", None) is None:
+    if rig._ibg is None:
         rig._ibg = np.ascontiguousarray(rig.inv_bind @ rig.geom_bind)
     todo = np.asarray(todo, dtype=np.int64)
     drow, prow = _dev_rows(rig, delta, pert, own, todo)

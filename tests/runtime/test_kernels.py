@@ -432,3 +432,92 @@ def test_batched_refine_decides_as_the_reference(seed, scale, growth, monkeypatc
         [(f["interval"], f["part"], f["definite"], f["vertex"]) for f in b.failures]
     for f, g in zip(a.failures, b.failures):
         assert f["excess"] == pytest.approx(g["excess"], rel=1e-9, abs=1e-12)
+
+
+# -- the sampled proof's exact tier by chunks (runtime.kernels.farthest) -------------------------
+def _chunk_bounds_naive(rig, m, centers, ch):
+    """``min(K_c, D_c)`` of :mod:`runtime.kernels.farthest` written out (numpy, unpadded)."""
+    def n2(L):  # the Gershgorin bound of runtime.kernels.bounds._norm2
+        return np.sqrt(np.abs(L.T @ L).sum(1).max())
+    F = len(m)
+    M = np.zeros((F, m.shape[1], 4, 4))
+    M[..., :3, :] = m.reshape(F, -1, 3, 4)
+    M[..., 3, 3] = 1
+    out = np.zeros((F, len(ch.radius)))
+    for p in range(rig.P):
+        J = rig.part_joint[p]
+        for c in range(ch.part_chunks[p], ch.part_chunks[p + 1]):
+            o, r = np.r_[ch.center[c], 1.0], ch.radius[c]
+            js = ch.joints[ch.joint_offsets[c]:ch.joint_offsets[c + 1]]
+            wm = ch.jwmax[ch.joint_offsets[c]:ch.joint_offsets[c + 1]]
+            for f in range(F):
+                C = centers[f, p]
+                yJ = (M[f, J] @ o)[:3]
+                nJ = n2(M[f, J, :3, :3])
+                K = ch.wabs[c] * max(np.linalg.norm((M[f, b] @ o)[:3] - C) + n2(M[f, b, :3, :3]) * r for b in js) \
+                    + ch.wdev[c] * np.linalg.norm(C)
+                D = np.linalg.norm(yJ - C) + nJ * r + ch.wdev[c] * (np.linalg.norm(yJ) + nJ * r) + sum(
+                    w * (np.linalg.norm((M[f, b] @ o)[:3] - yJ) + n2(M[f, b, :3, :3] - M[f, J, :3, :3]) * r)
+                    for b, w in zip(js, wm) if b != J)
+                out[f, c] = min(K, D)
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_chunk_bounds_hold_against_brute_force_and_are_the_written_bound(seed):
+    """The chunk bound ``min(K_c, D_c)`` is an upper bound of every chunk vertex's skinned distance
+    (dense brute force, random rigs, wild poses with non-uniform scales), and it is the bound the
+    docstring writes, to rounding (a bound loosened by 1 % fails here)."""
+    from colossus.runtime.kernels import farthest as FA
+    rng = np.random.default_rng(40 + seed)
+    rig, clip, skel = random_rig(rng, scale=seed == 2)
+    wild = naive.compose(naive.trs(rng.normal(size=(6, 6, 3)), Rotation.random(36, random_state=seed)
+                                   .as_quat().reshape(6, 6, 4), rng.uniform(0.5, 2, (6, 6, 3))), rig.parents)
+    ch = FA.chunk_data(rig.points, rig.joint_indices, rig.joint_weights, rig.vert_offsets, rig.verts, size=8)
+    for poses in (skel, wild):
+        m = rig.skin_mats(poses)
+        centers = rng.normal(size=(len(poses), rig.P, 3))
+        got = FA.chunk_bounds(m, centers, rig.part_joint, ch)
+        want = _chunk_bounds_naive(rig, m, centers, ch)
+        np.testing.assert_allclose(got, want, rtol=1e-9)
+        assert (got >= want).all()
+        y = naive.naive_lbs(rig.points, rig.joint_indices, rig.joint_weights, poses @ rig.inv_bind)
+        part = np.repeat(np.arange(rig.P), np.diff(ch.part_chunks))
+        for c in range(len(ch.radius)):
+            vs = rig.verts[ch.pos[ch.pos_offsets[c]:ch.pos_offsets[c + 1]]]
+            far = np.linalg.norm(y[:, vs] - centers[:, part[c], None], axis=2).max(1)
+            assert (far <= got[:, c]).all()
+            assert (far <= want[:, c] * (1 + 1e-9)).all()
+        # the bound is not vacuous: pruning has something to work with
+        assert (want < 1.5 * np.linalg.norm(y[:, rig.verts] - centers[:, np.repeat(np.arange(rig.P), np.diff(rig.vert_offsets))], axis=2).max()).mean() > 0.5
+
+
+@pytest.mark.parametrize("n", [400, 30000])  # the one-thread and the threaded kernel
+def test_chunk_search_equals_part_farthest(n):
+    """The exact tier by chunks returns exactly ``part_farthest``'s distances and vertices (ties
+    broken alike), for tight and random centres, an empty part, duplicated vertices (ties) and a
+    NaN point."""
+    from colossus.runtime.kernels import farthest as FA
+    rng = np.random.default_rng(5)
+    rig, clip, skel = random_rig(rng, n=n)
+    pts = rig.points.copy()
+    pts[rig.verts[rig.vert_offsets[1] + 3]] = pts[rig.verts[rig.vert_offsets[1] + 5]]  # a tie
+    voff = rig.vert_offsets.copy()
+    voff[2] = voff[3]  # part 2 empty, part 3 gets its vertices
+    m = rig.skin_mats(skel)
+    sph, _, _ = B.pose_bounds(skel, rig.bounds)
+    for centers in (sph[..., :3], sph[..., :3] + rng.normal(size=sph[..., :3].shape)):
+        todo = rng.random((len(skel), rig.P)) < 0.7
+        ch = FA.chunk_data(pts, rig.joint_indices, rig.joint_weights, voff, rig.verts)
+        d, v, skinned = FA.farthest(pts, rig.joint_indices, rig.joint_weights, m, voff, rig.verts, rig.part_joint,
+                                    centers, todo, ch)
+        d0, v0 = SK.part_farthest(pts, rig.joint_indices, rig.joint_weights, m, voff, rig.verts, centers, todo=todo)
+        np.testing.assert_array_equal(v, v0)
+        np.testing.assert_allclose(d, d0, rtol=1e-13)
+        assert np.isnan(d[~todo]).all() and skinned <= (np.diff(voff)[None] * todo).sum()
+    pts[rig.verts[0]] = np.nan  # its chunk's ball is NaN: never pruned
+    with np.errstate(invalid="ignore"):
+        ch = FA.chunk_data(pts, rig.joint_indices, rig.joint_weights, voff, rig.verts)
+    d, v, _ = FA.farthest(pts, rig.joint_indices, rig.joint_weights, m, voff, rig.verts, rig.part_joint,
+                          sph[..., :3], np.ones((len(skel), rig.P), bool), ch)
+    assert np.isinf(d[:, 0]).all() and (v[:, 0] == rig.verts[0]).all()
