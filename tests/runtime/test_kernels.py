@@ -266,7 +266,8 @@ def _dense(rig, clip, t0, t1, steps=64):
 
 
 @pytest.mark.parametrize("seed,scale", [(0, False), (1, False), (2, True), (3, False), (4, True)])
-def test_continuous_certificate_is_sound_against_dense_brute_force(seed, scale):
+def test_continuous_certificate_is_sound_against_dense_brute_force(seed, scale, monkeypatch):
+    monkeypatch.setattr(C, "BATCHED_MIN_PAIRS", 0)  # the batched levels B and C, as on a large asset
     rng = np.random.default_rng(seed)
     rig, clip, skel = random_rig(rng, scale=scale, tight=seed % 2 == 0 and not scale)
     # relative tolerance 1e-6: above float32 quaternion noise (1e-7), below the validator's 1e-5
@@ -305,7 +306,8 @@ def _half_lerp(s0, s1, f):
     return (h(h((1 - f) * s0) + h(f * s1))).astype(np.float64)
 
 
-def test_a_vertex_leaving_only_between_samples_is_caught_with_its_interval():
+@pytest.mark.parametrize("min_pairs", [0, 10 ** 9])  # the batched levels B and C, and the reference loop
+def test_a_vertex_leaving_only_between_samples_is_caught_with_its_interval(min_pairs, monkeypatch):
     """Two joints; the child swings +0.9 rad then -0.9 rad: the straight pose half-way is outside a
     sphere fitted to the two frames around a centre below the child's pivot (the tip is 1.368 from
     it at both frames and 1.5 when straight)."""
@@ -328,6 +330,7 @@ def test_a_vertex_leaving_only_between_samples_is_caught_with_its_interval():
     c = np.array([0.0, 0.5, 0.0])
     r = np.linalg.norm(yk - c, axis=2).max() * (1 + 1e-6)
     rig = C.Rig(pts, ji, jw, np.eye(4), bind, rest, parents, [0], c[None], [r], [0, 11], np.arange(11))
+    monkeypatch.setattr(C, "BATCHED_MIN_PAIRS", min_pairs)
     s = C.sampled(rig, skel, 0.0, 1e-6)
     ok = ~(s.bound > s.spheres[..., 3] * (1 + 1e-6))
     assert ok.all()  # both samples inside
@@ -422,6 +425,7 @@ def test_batched_refine_decides_as_the_reference(seed, scale, growth, monkeypatc
     res = {}
     for batched in (False, True):
         monkeypatch.setattr(C, "BATCHED", batched)
+        monkeypatch.setattr(C, "BATCHED_MIN_PAIRS", 0)
         res[batched] = C.continuous(rig, clip, clip.times, s.bound, ok, 0.0, 1e-6, **kw)
     a, b = res[False], res[True]
     assert a.subdivided > 0
