@@ -4,8 +4,10 @@ D, exact) and for every time between the samples of a clip as UsdSkel interpolat
 Used by the frame proof (:mod:`validators.frameproof`) and by the import's spheres stage
 (:mod:`pipeline.stages.spheres`, which grows each sphere just enough for the certificate); it
 sits in the runtime because both need it and the runtime is the lowest layer.  Numba kernels are
-in :mod:`runtime.kernels.bounds` and :mod:`runtime.kernels.skin`; the bounds and their soundness
-arguments are written in those modules' docstrings and in :func:`continuous` below.
+in :mod:`runtime.kernels.bounds`, :mod:`runtime.kernels.interval`, :mod:`runtime.kernels.skin`,
+:mod:`runtime.kernels.farthest` (the exact tier by chunks) and :mod:`runtime.kernels.subdivide`
+(levels B and C batched); the bounds and their soundness arguments are written in those modules'
+docstrings and in :func:`continuous` below.
 
 Matrices are column-vector float64 (``p' = M @ p``).  ``world`` is the skeleton prim's
 local-to-world transform (stage space); a clip is a :class:`runtime.schema.Clip`.
@@ -290,7 +292,8 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
       sampled proof's bounds of the farthest vertex at both ends, in J space), so the bound is
       ``max(D0, D1) + min(a_P max_b delta_b, sum_b wmax_b delta_b)``.
     * Level B: the same per vertex, with both ends skinned exactly
-      (:func:`runtime.kernels.interval.chord_tasks`).
+      (:func:`runtime.kernels.subdivide.chord_nodes`, batched over every open node of a level;
+      its numpy reference :func:`runtime.kernels.interval.chord_tasks`).
     * Level C: halve the interval (UsdSkel's interpolation evaluated at the midpoint by the
       runtime's port, :mod:`runtime.kernels.pose`); on a sub-interval of fraction f the
       recursion's velocities scale by f and accelerations by f^2 (the magnitudes bounded on the
