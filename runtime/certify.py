@@ -34,10 +34,12 @@ FAIL_SAMPLES = 16
 #: subdivision level over every open node); False: the reference loop (:func:`_refine`, one
 #: numpy call per node, kept as the benchmark's baseline and the tests' reference).
 BATCHED = True
-#: Below this many open (interval, part) pairs the reference loop runs instead (the same
-#: decisions): a demo-sized asset's few pairs take milliseconds so, and a new user's first import
-#: or validation does not compile the batched kernels.
+#: Until this process has refined this many open (interval, part) pairs the reference loop runs
+#: instead (the same decisions): a demo-sized asset's few pairs take milliseconds so, and a new
+#: user's first import or validation of it does not compile the batched kernels (~2 s once per
+#: machine); a real character's clips pass it within the first clips.
 BATCHED_MIN_PAIRS = 128
+_refined_pairs = 0
 #: The sampled proof's exact tier by the chunk search (:func:`runtime.kernels.farthest.farthest`:
 #: chunk bounds first, then exact skinning of the chunks that can hold the farthest vertex,
 #: threaded); False: every vertex of the part (:func:`runtime.kernels.skin.part_farthest`, the
@@ -394,7 +396,9 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     out = Continuous(status, bound, rho, ratio=ratio[:, J].copy())
     todo = np.argwhere(status == -1)
     if len(todo):
-        batched = BATCHED and len(todo) >= BATCHED_MIN_PAIRS
+        global _refined_pairs
+        _refined_pairs += len(todo)
+        batched = BATCHED and _refined_pairs >= BATCHED_MIN_PAIRS
         (_refine_batched if batched else _refine)(rig, clip, times, fac, delta, pert, own, pair_part, todo, out,
                                                   tol_abs, tol_rel, growth, max_depth)
     return out

@@ -40,7 +40,7 @@ from numba import njit, prange
 from .bounds import ROUND
 from .config import FASTMATH_PROOF
 from .interval import _inv_affine_into
-from .pose import locals_at
+from .pose import compose, locals_at
 from .skin import PARALLEL_WORK, _lbs
 
 
@@ -69,11 +69,18 @@ def _compose_many(local, parents, topo, ibg, skel, skin):
                     skin[t, j, r, c] = a0 * ibg[j, 0, c] + a1 * ibg[j, 1, c] + a2 * ibg[j, 2, c] + a3 * ibg[j, 3, c]
 
 
+#: Below this many (time, joint) transforms :func:`pose_at` composes in numpy (the same products).
+COMPOSE_KERNEL_MIN = 4096
+
+
 def pose_at(clip, times, rest_local, parents, topo, ibg):
     """Skeleton-space (T, J, 4, 4) and skinning (T, J, 4, 4) transforms of ``clip`` at ``times``
     (T,), interpolated as UsdSkel does (:func:`runtime.kernels.pose.locals_at`, its kernel)."""
-    local = locals_at(clip, times, rest_local, compiled=True)
+    local = locals_at(clip, times, rest_local)  # the kernel on large batches (its own size rule)
     T, J = local.shape[:2]
+    if T * J < COMPOSE_KERNEL_MIN:  # numpy: nothing to compile for a demo-sized asset
+        skel = compose(local, parents, topo)
+        return skel, skel @ ibg
     skel = np.empty((T, J, 4, 4))
     skin = np.empty((T, J, 4, 4))
     _compose_many(local, parents, topo, ibg, skel, skin)
