@@ -106,7 +106,8 @@ def reference_paths():
     """Run the proof and the spheres stage on the reference paths the compiled ones replaced (issue
     22 items 2-3): the continuous certificate's levels B and C one numpy call per node
     (``certify.BATCHED = False``) and the sampled proof's exact tier skinning every vertex of a part
-    (``certify.CHUNKED = False``): the "before" of the rows, in the same process, same results."""
+    (``certify.CHUNKED = False``, also the default for now): the "before" of the rows, in the same
+    process, same results."""
     from colossus.runtime import certify
 
     old = certify.BATCHED, certify.CHUNKED

@@ -42,9 +42,12 @@ BATCHED_MIN_PAIRS = 128
 _refined_pairs = 0
 #: The sampled proof's exact tier by the chunk search (:func:`runtime.kernels.farthest.farthest`:
 #: chunk bounds first, then exact skinning of the chunks that can hold the farthest vertex,
-#: threaded); False: every vertex of the part (:func:`runtime.kernels.skin.part_farthest`, the
-#: reference and the benchmark's baseline).  The same distances and vertices either way.
-CHUNKED = True
+#: threaded) instead of every vertex of the part (:func:`runtime.kernels.skin.part_farthest`).
+#: The same distances and vertices either way.  Off: on the corpus characters' tight spheres most
+#: chunks lie near the sphere (8-vertex chunks still skin 59 % of the vertex-poses on the Godot
+#: mannequin, 16-vertex ones 76 %) and the search skinned ~20 % slower per vertex, so it measured
+#: 0.7-0.9x the whole-part kernel (issue 22 item 3, open).
+CHUNKED = False
 #: :func:`_refine_batched` computes the joint transforms of at most about this many bytes of
 #: times at once (the nodes of a level are processed in chunks).
 BATCH_BYTES = 16 << 20

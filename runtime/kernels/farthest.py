@@ -218,6 +218,7 @@ def _farthest_task(t, task_f, task_p, points, ji, jw, m, pverts, centers, part_j
     for c in range(c0, c1):
         kb[c - c0] = _chunk_bound(f, c, J, m, cx, cy, cz, center, radius, wabs, wdev, joint_offsets, joints, jwmax)
     order = np.argsort(-kb)
+    buf = np.empty(pos_offsets[c1] - pos_offsets[c0])  # >= the largest chunk
     best2 = -1.0
     bpos = -1
     skinned = 0
@@ -226,15 +227,19 @@ def _farthest_task(t, task_f, task_p, points, ji, jw, m, pverts, centers, part_j
         k = kb[order[n]]
         if k * k <= 1e300 and k * k < best2:  # no vertex of this chunk, or of the next, can reach it
             break
-        for i in range(pos_offsets[c], pos_offsets[c + 1]):
-            q = pos[i]
+        i0, i1 = pos_offsets[c], pos_offsets[c + 1]
+        for i in range(i0, i1):  # skin the chunk (no branch: the loop LLVM optimises best)
             x, y, z = _lbs(i, f, cpoints, cji, cjw, m)
-            d2 = (x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2
+            buf[i - i0] = (x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2
+        for i in range(i0, i1):
+            d2 = buf[i - i0]
             if not (d2 <= 1e300):  # NaN or inf: as far as it gets
                 d2 = np.inf
-            if d2 > best2 or (d2 == best2 and q < bpos):
-                best2 = d2
-                bpos = q
+            if d2 >= best2:
+                q = pos[i]
+                if d2 > best2 or q < bpos:
+                    best2 = d2
+                    bpos = q
         skinned += pos_offsets[c + 1] - pos_offsets[c]
     out_d[t] = math.sqrt(best2)
     out_v[t] = pverts[bpos]

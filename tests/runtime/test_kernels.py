@@ -525,3 +525,20 @@ def test_chunk_search_equals_part_farthest(n):
     d, v, _ = FA.farthest(pts, rig.joint_indices, rig.joint_weights, m, voff, rig.verts, rig.part_joint,
                           sph[..., :3], np.ones((len(skel), rig.P), bool), ch)
     assert np.isinf(d[:, 0]).all() and (v[:, 0] == rig.verts[0]).all()
+
+
+def test_sampled_proof_is_the_same_with_the_chunk_search(monkeypatch):
+    """``certify.sampled`` with the exact tier by chunks (``certify.CHUNKED``) and by whole parts:
+    the same tiers, bounds, distances and vertices."""
+    rng = np.random.default_rng(12)
+    rig, clip, skel = random_rig(rng, n=2000)
+    out = {}
+    exact = rng.random((len(skel), rig.P)) < 0.5
+    for chunked in (False, True):
+        monkeypatch.setattr(C, "CHUNKED", chunked)
+        out[chunked] = C.sampled(rig, skel, 0.0, 1e-6, exact=exact)
+    a, b = out[False], out[True]
+    np.testing.assert_array_equal(a.tier, b.tier)
+    np.testing.assert_array_equal(a.vertex, b.vertex)
+    np.testing.assert_allclose(b.dist, a.dist, rtol=1e-13)
+    np.testing.assert_allclose(b.bound, a.bound, rtol=1e-13)
