@@ -266,7 +266,8 @@ def _dense(rig, clip, t0, t1, steps=64):
 
 
 @pytest.mark.parametrize("seed,scale", [(0, False), (1, False), (2, True), (3, False), (4, True)])
-def test_continuous_certificate_is_sound_against_dense_brute_force(seed, scale):
+def test_continuous_certificate_is_sound_against_dense_brute_force(seed, scale, monkeypatch):
+    monkeypatch.setattr(C, "BATCHED_MIN_PAIRS", 0)  # the batched levels B and C, as on a large asset
     rng = np.random.default_rng(seed)
     rig, clip, skel = random_rig(rng, scale=scale, tight=seed % 2 == 0 and not scale)
     # relative tolerance 1e-6: above float32 quaternion noise (1e-7), below the validator's 1e-5
@@ -305,7 +306,8 @@ def _half_lerp(s0, s1, f):
     return (h(h((1 - f) * s0) + h(f * s1))).astype(np.float64)
 
 
-def test_a_vertex_leaving_only_between_samples_is_caught_with_its_interval():
+@pytest.mark.parametrize("min_pairs", [0, 10 ** 9])  # the batched levels B and C, and the reference loop
+def test_a_vertex_leaving_only_between_samples_is_caught_with_its_interval(min_pairs, monkeypatch):
     """Two joints; the child swings +0.9 rad then -0.9 rad: the straight pose half-way is outside a
     sphere fitted to the two frames around a centre below the child's pivot (the tip is 1.368 from
     it at both frames and 1.5 when straight)."""
@@ -328,6 +330,7 @@ def test_a_vertex_leaving_only_between_samples_is_caught_with_its_interval():
     c = np.array([0.0, 0.5, 0.0])
     r = np.linalg.norm(yk - c, axis=2).max() * (1 + 1e-6)
     rig = C.Rig(pts, ji, jw, np.eye(4), bind, rest, parents, [0], c[None], [r], [0, 11], np.arange(11))
+    monkeypatch.setattr(C, "BATCHED_MIN_PAIRS", min_pairs)
     s = C.sampled(rig, skel, 0.0, 1e-6)
     ok = ~(s.bound > s.spheres[..., 3] * (1 + 1e-6))
     assert ok.all()  # both samples inside
@@ -362,3 +365,180 @@ def test_pareto_set_keeps_every_maximiser():
         e = rng.random(4)
         val = e[0] * d + w @ e[1:]
         assert val[keep].max() == pytest.approx(val.max())
+
+
+# -- the continuous certificate's levels B and C, batched (runtime.kernels.subdivide) ----------
+def test_chord_nodes_equals_chord_tasks():
+    """The batched per-vertex chord bound (one kernel over all nodes, J-space transforms built in
+    the kernel from skeleton and skinning transforms) against the numpy reference
+    ``interval.chord_tasks`` on the same nodes, and against its definition by brute force."""
+    from colossus.runtime.kernels import subdivide as SD
+    rng = np.random.default_rng(31)
+    rig, clip, skel = random_rig(rng, scale=True)
+    I = len(clip.times) - 1
+    ibg = rig.inv_bind @ rig.geom_bind
+    ts = np.r_[clip.times, clip.times[:-1] + 0.37, clip.times[:-1] + 0.5]
+    sk, skin = SD.pose_at(clip, ts, rig.rest_local, rig.parents, rig.topo, ibg)
+    np.testing.assert_allclose(skin, sk @ ibg, rtol=0, atol=1e-12)
+    N = 40
+    part = rng.integers(0, rig.P, N)
+    ta, tb = rng.integers(0, len(ts), N), rng.integers(0, len(ts), N)
+    row = rng.integers(0, 7, N)
+    scale = rng.random(N)
+    drow = rng.random((7, len(rig.bind))) * 0.1
+    prow = rng.random((7, len(rig.bind))) * 0.01
+    bd = rig.bounds
+    got = SD.chord_nodes(rig.points, rig.joint_indices, rig.joint_weights, rig.vert_offsets, rig.verts,
+                         bd.part_joint, bd.pj_offsets, bd.pj_joint, bd.part_centers, sk, skin, part, ta, tb, row,
+                         scale, drow, prow)
+    # the reference: J-space folded transforms per (time, part joint), one task per node
+    mats = np.stack([rig.joint_space_mats(sk[[ta[n], tb[n]]], rig.part_joint[part[n]]) for n in range(N)])
+    mats = mats.reshape(2 * N, len(rig.bind), 12)
+    want = IV.chord_tasks(rig.points, rig.joint_indices, rig.joint_weights, mats, rig.vert_offsets, rig.verts,
+                          bd.part_centers, part, 2 * np.arange(N), 2 * np.arange(N) + 1, row, scale, drow, prow)
+    for g, w in zip(got, want):
+        np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-12)
+    # by definition: every vertex at both ends, its weighted deviation, the largest sum
+    for n in range(N):
+        vs = rig.verts[rig.vert_offsets[part[n]]:rig.vert_offsets[part[n] + 1]]
+        J = rig.part_joint[part[n]]
+        ends = [naive.naive_lbs(rig.points[vs], rig.joint_indices[vs], rig.joint_weights[vs],
+                                (np.linalg.inv(sk[t, J]) @ sk[t] @ ibg)[None])[0] for t in (ta[n], tb[n])]
+        d = [np.linalg.norm(e - rig.part_centers[part[n]], axis=1) for e in ends]
+        x = scale[n] * drow[row[n]] + prow[row[n]]
+        dev = (np.abs(rig.joint_weights[vs]) * x[rig.joint_indices[vs]]).sum(1)
+        u = (np.maximum(d[0], d[1]) + dev).max()
+        assert u <= got[0][n] <= u * (1 + 3e-12)  # the bound, padded by ROUND, and no more
+        assert got[2][n] == pytest.approx(d[0].max(), rel=1e-12) and got[4][n] == pytest.approx(d[1].max(), rel=1e-12)
+
+
+@pytest.mark.parametrize("seed,scale,growth", [(0, False, False), (1, False, True), (2, True, False),
+                                               (4, True, True), (5, False, False)])
+def test_batched_refine_decides_as_the_reference(seed, scale, growth, monkeypatch):
+    """Levels B and C batched (``certify.BATCHED``) against the reference loop: the same status
+    of every (interval, part), the same subdivisions and failures, the same bounds to rounding."""
+    rng = np.random.default_rng(seed)
+    rig, clip, skel = random_rig(rng, scale=scale, tight=True)
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    ok = ~(s.bound > s.spheres[..., 3] * (1 + 1e-6))
+    kw = dict(growth=True, max_depth=5, rho=rig.part_radii * 0.98) if growth else {}
+    res = {}
+    for batched in (False, True):
+        monkeypatch.setattr(C, "BATCHED", batched)
+        monkeypatch.setattr(C, "BATCHED_MIN_PAIRS", 0)
+        res[batched] = C.continuous(rig, clip, clip.times, s.bound, ok, 0.0, 1e-6, **kw)
+    a, b = res[False], res[True]
+    assert a.subdivided > 0
+    np.testing.assert_array_equal(a.status, b.status)
+    assert a.subdivided == b.subdivided
+    np.testing.assert_allclose(b.bound, a.bound, rtol=1e-12)
+    assert [(f["interval"], f["part"], f["definite"], f["vertex"]) for f in a.failures] == \
+        [(f["interval"], f["part"], f["definite"], f["vertex"]) for f in b.failures]
+    for f, g in zip(a.failures, b.failures):
+        assert f["excess"] == pytest.approx(g["excess"], rel=1e-9, abs=1e-12)
+
+
+# -- the sampled proof's exact tier by chunks (runtime.kernels.farthest) -------------------------
+def _chunk_bounds_naive(rig, m, centers, ch):
+    """``min(K_c, D_c)`` of :mod:`runtime.kernels.farthest` written out (numpy, unpadded)."""
+    def n2(L):  # the Gershgorin bound of runtime.kernels.bounds._norm2
+        return np.sqrt(np.abs(L.T @ L).sum(1).max())
+    F = len(m)
+    M = np.zeros((F, m.shape[1], 4, 4))
+    M[..., :3, :] = m.reshape(F, -1, 3, 4)
+    M[..., 3, 3] = 1
+    out = np.zeros((F, len(ch.radius)))
+    for p in range(rig.P):
+        J = rig.part_joint[p]
+        for c in range(ch.part_chunks[p], ch.part_chunks[p + 1]):
+            o, r = np.r_[ch.center[c], 1.0], ch.radius[c]
+            js = ch.joints[ch.joint_offsets[c]:ch.joint_offsets[c + 1]]
+            wm = ch.jwmax[ch.joint_offsets[c]:ch.joint_offsets[c + 1]]
+            for f in range(F):
+                C = centers[f, p]
+                yJ = (M[f, J] @ o)[:3]
+                nJ = n2(M[f, J, :3, :3])
+                K = ch.wabs[c] * max(np.linalg.norm((M[f, b] @ o)[:3] - C) + n2(M[f, b, :3, :3]) * r for b in js) \
+                    + ch.wdev[c] * np.linalg.norm(C)
+                D = np.linalg.norm(yJ - C) + nJ * r + ch.wdev[c] * (np.linalg.norm(yJ) + nJ * r) + sum(
+                    w * (np.linalg.norm((M[f, b] @ o)[:3] - yJ) + n2(M[f, b, :3, :3] - M[f, J, :3, :3]) * r)
+                    for b, w in zip(js, wm) if b != J)
+                out[f, c] = min(K, D)
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_chunk_bounds_hold_against_brute_force_and_are_the_written_bound(seed):
+    """The chunk bound ``min(K_c, D_c)`` is an upper bound of every chunk vertex's skinned distance
+    (dense brute force, random rigs, wild poses with non-uniform scales), and it is the bound the
+    docstring writes, to rounding (a bound loosened by 1 % fails here)."""
+    from colossus.runtime.kernels import farthest as FA
+    rng = np.random.default_rng(40 + seed)
+    rig, clip, skel = random_rig(rng, scale=seed == 2)
+    wild = naive.compose(naive.trs(rng.normal(size=(6, 6, 3)), Rotation.random(36, random_state=seed)
+                                   .as_quat().reshape(6, 6, 4), rng.uniform(0.5, 2, (6, 6, 3))), rig.parents)
+    ch = FA.chunk_data(rig.points, rig.joint_indices, rig.joint_weights, rig.vert_offsets, rig.verts, size=8)
+    for poses in (skel, wild):
+        m = rig.skin_mats(poses)
+        centers = rng.normal(size=(len(poses), rig.P, 3))
+        got = FA.chunk_bounds(m, centers, rig.part_joint, ch)
+        want = _chunk_bounds_naive(rig, m, centers, ch)
+        np.testing.assert_allclose(got, want, rtol=1e-9)
+        assert (got >= want).all()
+        y = naive.naive_lbs(rig.points, rig.joint_indices, rig.joint_weights, poses @ rig.inv_bind)
+        part = np.repeat(np.arange(rig.P), np.diff(ch.part_chunks))
+        for c in range(len(ch.radius)):
+            vs = rig.verts[ch.pos[ch.pos_offsets[c]:ch.pos_offsets[c + 1]]]
+            far = np.linalg.norm(y[:, vs] - centers[:, part[c], None], axis=2).max(1)
+            assert (far <= got[:, c]).all()
+            assert (far <= want[:, c] * (1 + 1e-9)).all()
+        # the bound is not vacuous: pruning has something to work with
+        assert (want < 1.5 * np.linalg.norm(y[:, rig.verts] - centers[:, np.repeat(np.arange(rig.P), np.diff(rig.vert_offsets))], axis=2).max()).mean() > 0.5
+
+
+@pytest.mark.parametrize("n", [400, 30000])  # the one-thread and the threaded kernel
+def test_chunk_search_equals_part_farthest(n):
+    """The exact tier by chunks returns exactly ``part_farthest``'s distances and vertices (ties
+    broken alike), for tight and random centres, an empty part, duplicated vertices (ties) and a
+    NaN point."""
+    from colossus.runtime.kernels import farthest as FA
+    rng = np.random.default_rng(5)
+    rig, clip, skel = random_rig(rng, n=n)
+    pts = rig.points.copy()
+    pts[rig.verts[rig.vert_offsets[1] + 3]] = pts[rig.verts[rig.vert_offsets[1] + 5]]  # a tie
+    voff = rig.vert_offsets.copy()
+    voff[2] = voff[3]  # part 2 empty, part 3 gets its vertices
+    m = rig.skin_mats(skel)
+    sph, _, _ = B.pose_bounds(skel, rig.bounds)
+    for centers in (sph[..., :3], sph[..., :3] + rng.normal(size=sph[..., :3].shape)):
+        todo = rng.random((len(skel), rig.P)) < 0.7
+        ch = FA.chunk_data(pts, rig.joint_indices, rig.joint_weights, voff, rig.verts)
+        d, v, skinned = FA.farthest(pts, rig.joint_indices, rig.joint_weights, m, voff, rig.verts, rig.part_joint,
+                                    centers, todo, ch)
+        d0, v0 = SK.part_farthest(pts, rig.joint_indices, rig.joint_weights, m, voff, rig.verts, centers, todo=todo)
+        np.testing.assert_array_equal(v, v0)
+        np.testing.assert_allclose(d, d0, rtol=1e-13)
+        assert np.isnan(d[~todo]).all() and skinned <= (np.diff(voff)[None] * todo).sum()
+    pts[rig.verts[0]] = np.nan  # its chunk's ball is NaN: never pruned
+    with np.errstate(invalid="ignore"):
+        ch = FA.chunk_data(pts, rig.joint_indices, rig.joint_weights, voff, rig.verts)
+    d, v, _ = FA.farthest(pts, rig.joint_indices, rig.joint_weights, m, voff, rig.verts, rig.part_joint,
+                          sph[..., :3], np.ones((len(skel), rig.P), bool), ch)
+    assert np.isinf(d[:, 0]).all() and (v[:, 0] == rig.verts[0]).all()
+
+
+def test_sampled_proof_is_the_same_with_the_chunk_search(monkeypatch):
+    """``certify.sampled`` with the exact tier by chunks (``certify.CHUNKED``) and by whole parts:
+    the same tiers, bounds, distances and vertices."""
+    rng = np.random.default_rng(12)
+    rig, clip, skel = random_rig(rng, n=2000)
+    out = {}
+    exact = rng.random((len(skel), rig.P)) < 0.5
+    for chunked in (False, True):
+        monkeypatch.setattr(C, "CHUNKED", chunked)
+        out[chunked] = C.sampled(rig, skel, 0.0, 1e-6, exact=exact)
+    a, b = out[False], out[True]
+    np.testing.assert_array_equal(a.tier, b.tier)
+    np.testing.assert_array_equal(a.vertex, b.vertex)
+    np.testing.assert_allclose(b.dist, a.dist, rtol=1e-13)
+    np.testing.assert_allclose(b.bound, a.bound, rtol=1e-13)
