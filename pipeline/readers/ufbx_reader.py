@@ -51,11 +51,12 @@ import numpy as np
 
 from .. import notcarried
 from ..errors import InputError
-from ..xforms import compose_trs, decompose_trs, slerp
+from ..xforms import compose_trs, decompose_trs, degenerate, slerp
 from . import bounds, fbx_checks, fbx_doc
 from .common import AllocationBudget, check_finite, check_input_file
 from .scene import Animation, Channel, Scene, SceneMesh, Skin
 from .scene.build import build
+from .scene.graph import _BAD_XFORM
 
 #: Frames of each clip (evenly spread, ends included) at which the result is checked against
 #: ufbx's evaluation, besides the rest pose.
@@ -169,6 +170,30 @@ def _triangulate(corners: np.ndarray, pts: np.ndarray) -> list:
     return out
 
 
+def _triangles(faces: np.ndarray, vidx: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """(m, 3) triangles of every polygon (``faces``: (begin, count) into ``vidx``): triangles as
+    they are, quads in one vectorised pass (split at their reflex corner when concave), larger
+    polygons by :func:`_triangulate`."""
+    begin, count = faces[:, 0], faces[:, 1]
+    out = [vidx[begin[count == 3, None] + np.arange(3)]]
+    q = np.flatnonzero(count == 4)
+    if len(q):
+        c = vidx[begin[q, None] + np.arange(4)]                       # (Q, 4)
+        p = pts[c]                                                     # (Q, 4, 3)
+        e = np.roll(p, -1, axis=1) - p                                 # edge i: corner i -> i + 1
+        normal = np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1])        # the quad's normal (diagonals)
+        turn = np.einsum("qij,qj->qi", np.cross(np.roll(e, 1, axis=1), e), normal)  # at each corner
+        reflex = np.where(turn.min(axis=1) < 0, np.argmin(turn, axis=1), 0)
+        r = (reflex[:, None] + np.arange(4)) % 4                       # start the fan at the reflex corner
+        c = np.take_along_axis(c, r, axis=1)
+        out += [c[:, [0, 1, 2]], c[:, [0, 2, 3]]]
+    big = np.flatnonzero(count > 4)
+    if len(big):
+        out.append(np.array([t for i in big for t in _triangulate(vidx[begin[i]:begin[i] + count[i]], pts)],
+                            dtype=np.int64).reshape(-1, 3))
+    return np.concatenate(out).reshape(-1, 3) if out else np.zeros((0, 3), np.int64)
+
+
 def _load(path, **opts):
     import ufbx
 
@@ -201,8 +226,15 @@ _KEEP = []
 
 
 def _local(tr) -> np.ndarray:
-    """ufbx Transform (translation, rotation quaternion x y z w, scale) -> 4x4 ``T R S``."""
-    return compose_trs(np.array(tuple(tr.translation)), np.array(tuple(tr.rotation)), np.array(tuple(tr.scale)))
+    """ufbx Transform (translation, rotation quaternion x y z w, scale) -> 4x4 ``T R S``; all NaN
+    when ufbx could not make a rotation of it (a non-finite Euler curve value): refused later as a
+    degenerate transform, in one line."""
+    q = np.array(tuple(tr.rotation), dtype=np.float64)
+    with np.errstate(all="ignore"):
+        n = float(np.linalg.norm(q))
+    if not (np.isfinite(n) and n > 1e-12):
+        return np.full((4, 4), np.nan)
+    return compose_trs(np.array(tuple(tr.translation)), q / n, np.array(tuple(tr.scale)))
 
 
 class _Graph:
@@ -217,6 +249,9 @@ class _Graph:
         for i, p in enumerate(self.parents):
             world[..., i, :, :] = local[..., i, :, :] if p < 0 else world[..., p, :, :] @ local[..., i, :, :]
         return world
+
+    def locals_of_many(self, worlds) -> np.ndarray:
+        return np.array([self.locals_of(w) for w in worlds]).reshape(worlds.shape)
 
     def locals_of(self, world) -> np.ndarray:
         out = world.copy()
@@ -280,11 +315,8 @@ def _mesh_records(r: _Read, budget, notes, items):
         vidx = _u32s(mesh.vertex_indices)
         if len(vidx) and vidx.max() >= nv:
             raise InputError(r.path, f"mesh {node.name!r}: a face index is out of range for {nv} vertices")
-        tris = []
-        for f in mesh.faces:
-            b, n = int(f[0]), int(f[1])
-            tris += _triangulate(vidx[b:b + n], pts)
-        tri = np.array(tris, dtype=np.int64).reshape(-1, 3)
+        faces = np.array([tuple(f) for f in mesh.faces], dtype=np.int64).reshape(-1, 2)
+        tri = _triangles(faces, vidx, pts)
         instances = _items(mesh.instances)
         skins = _items(mesh.skin_deformers)
         skin = None
@@ -526,6 +558,21 @@ def read_ufbx(path, meshes=None, fps=None):
     if not scene_meshes:
         raise InputError(path, "the scene has no mesh")
     r = _Graph(x.names, x.parents, x.world, x.theirs)
+    # a transform no joint can take (not finite, huge, zero or collapsed scale) on a mesh's or a
+    # bone's chain: refused here, before anything inverts or decomposes it, as check_scene refuses
+    # it for the other readers (a node elsewhere may scale to 0: a prop hidden that way)
+    chain = set()
+    for m in scene_meshes:
+        for n in [m.node, *([int(j) for j in m.skin.joints if j >= 0] if m.skin is not None else [])]:
+            while n >= 0 and n not in chain:
+                chain.add(n)
+                n = int(x.parents[n])
+    chain = np.array(sorted(chain), dtype=np.int64)
+    for label, worlds in [("at rest", x.world[None])] + [(f"in animation {n!r}", w) for n, _, _, w in x.stacks]:
+        with np.errstate(all="ignore"):
+            bad = np.argwhere(degenerate(worlds[:, chain]) | degenerate(r.locals_of_many(worlds)[:, chain]))
+        if len(bad):
+            raise InputError(path, f"the transform of node {x.names[chain[bad[0][1]]]!r} {label} {_BAD_XFORM}")
 
     # transform_skin: C = N @ inv(N_bind) of the one skinned mesh node, at rest and at every frame
     fold, moved_by = False, 0.0
