@@ -63,6 +63,96 @@ def test_part_farthest_matches_naive_lbs_and_todo():
                 assert v[f, p] in verts[dist == dist.max()]
 
 
+def _dq_rig(rng, n=300, J=7, k=4, F=6, kind="rigid"):
+    """Random DQS inputs: per-frame skinning transforms with large rotations (hemisphere flips),
+    and (``kind``) uniform / non-uniform scales, shear, a mirrored joint or a singular one."""
+    pts = (2 * rng.normal(size=(n, 3))).astype(np.float32)
+    ji = rng.integers(0, J, size=(n, k)).astype(np.int32)
+    jw = (rng.random((n, k)) * (rng.random((n, k)) < 0.8)).astype(np.float32)
+    jw[:, 0] += 1e-3
+    jw = (jw / jw.sum(1, keepdims=True)).astype(np.float32)
+    ji[jw == 0] = 99  # padding may name any joint
+    m = np.repeat(np.eye(4)[None, None], F, 0).repeat(J, 1)
+    m[..., :3, :3] = Rotation.random(F * J, random_state=int(rng.integers(1 << 30))).as_matrix().reshape(F, J, 3, 3)
+    if kind in ("uniform", "nonuniform", "shear", "mirror", "singular"):
+        s = rng.uniform(0.6, 1.5, size=(F, J, 1 if kind == "uniform" else 3))
+        m[..., :3, :3] = m[..., :3, :3] * s[..., None, :]
+    if kind == "shear":
+        m[..., :3, :3] += 0.2 * rng.normal(size=(F, J, 3, 3))
+    if kind == "mirror":
+        m[:, 1, :3, :3] *= -1
+    if kind == "singular":
+        m[:, 2, :3, :3] *= 1e-4  # |det| < 1e-10: UsdSkel's Factor gives up on it
+    m[..., :3, 3] = 3 * rng.normal(size=(F, J, 3))
+    G = np.eye(4)
+    G[:3, :3] = Rotation.random(random_state=int(rng.integers(1 << 30))).as_matrix() * 1.3
+    G[:3, 3] = rng.normal(size=3)
+    return pts, ji, jw, m, G
+
+
+def _usd_dqs(pts, ji, jw, m, G):
+    """usd-core's own dual-quaternion skinning of every frame of ``m``: (F, n, 3) float64."""
+    out = []
+    g = Gf.Matrix4d(*np.asarray(G).T.reshape(-1).tolist())
+    idx = Vt.IntArray.FromNumpy(np.where(jw == 0, 0, ji).reshape(-1).astype(np.int32))
+    wts = Vt.FloatArray.FromNumpy(jw.reshape(-1))
+    for mf in m:
+        xf = Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.swapaxes(mf, -1, -2)))
+        p = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts))
+        assert UsdSkel.SkinPoints(UsdSkel.Tokens.dualQuaternion, g, xf, idx, wts, ji.shape[1], p)
+        out.append(np.asarray(p, dtype=np.float64))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("kind", ["rigid", "uniform", "nonuniform", "shear", "mirror", "singular"])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_dqs_matches_usdskel_on_every_frame(kind, seed):
+    """The one kernel's dual-quaternion switch is UsdSkel's DQS, scale and shear included."""
+    rng = np.random.default_rng(100 + seed)
+    pts, ji, jw, m, G = _dq_rig(rng, kind=kind)
+    ref = _usd_dqs(pts, ji, jw, m, G)
+    got = SK.skin_frames(pts, ji, jw, SK.fold_dq(m, G), dtype=np.float64)
+    size = np.linalg.norm(ref.reshape(-1, 3).max(0) - ref.reshape(-1, 3).min(0))
+    assert np.abs(got - ref).max() <= 1e-6 * size
+    assert np.abs(SK.skin_frames(pts, ji, jw, SK.fold_method("dualQuaternion", m, G)) - ref).max() <= 1e-6 * size
+
+
+@pytest.mark.parametrize("n", [50, 9000])  # serial and parallel kernels
+@pytest.mark.parametrize("kind", ["rigid", "nonuniform", "mirror"])
+def test_dqs_matches_naive_dqs(n, kind):
+    rng = np.random.default_rng(7)
+    pts, ji, jw, m, G = _dq_rig(rng, n=n, F=2, kind=kind)
+    W = np.eye(4)
+    W[:3, :3] = 2.0 * Rotation.random(random_state=3).as_matrix()
+    W[:3, 3] = [1, 2, 3]
+    got = SK.skin_frames(pts, ji, jw, SK.fold_dq(m, G, W), dtype=np.float64)
+    ref = naive.naive_dqs(pts, ji, jw, m, G) @ W[:3, :3].T + W[:3, 3] if n < 1000 else None
+    if ref is None:  # the parallel driver against the serial one
+        ref = SK.skin_frames(pts[:200], ji[:200], jw[:200], SK.fold_dq(m, G, W), dtype=np.float64)
+        got = got[:, :200]
+    np.testing.assert_allclose(got, ref, atol=1e-9 * np.abs(ref).max())
+
+
+def test_dqs_part_farthest_and_subset_use_the_switch():
+    rng = np.random.default_rng(8)
+    pts, ji, jw, m, G = _dq_rig(rng, F=3, kind="uniform")
+    mats = SK.fold_dq(m, G)
+    ref = naive.naive_dqs(pts, ji, jw, m, G)
+    poff = np.array([0, 40, 300])
+    pv = np.arange(300, dtype=np.int32)
+    c = rng.normal(size=(3, 2, 3))
+    d, v = SK.part_farthest(pts, ji, jw, mats, poff, pv, c)
+    for f in range(3):
+        for p in range(2):
+            vs = pv[poff[p]:poff[p + 1]]
+            dist = np.linalg.norm(ref[f, vs] - c[f, p], axis=1)
+            assert d[f, p] == pytest.approx(dist.max(), rel=1e-9) and v[f, p] == vs[np.argmax(dist)]
+    out = np.zeros((300, 3), np.float32)
+    pi, pj, pw = SK.check_skin_inputs(pts, ji, jw, m.shape[1])
+    SK._skin_subset(pv, 0, 300, pi, pj, pw, np.ascontiguousarray(mats[:1]), out)
+    np.testing.assert_allclose(out, ref[0], atol=1e-5 * np.abs(ref).max())
+
+
 def test_skin_inputs_one_padding_policy():
     rng = np.random.default_rng(3)
     pts, ji, jw, m = _random_skin(rng)
