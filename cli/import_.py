@@ -54,7 +54,7 @@ def _stage_line(rep) -> str:
         return (f"{c['faces_in']} -> {c['faces_out']} faces, {c['closed_shells_out']}/{c['closed_shells_in']} closed shells "
                 f"closed, deviation <= {_num(c['deviation'], '.4g')} ({_num(None if c['deviation_relative'] is None else 100 * c['deviation_relative'], '.3g')}% of size)")
     if s == "write":
-        return f"{c['path']} ({c['bytes']} bytes)"
+        return f"{c['path']} ({c['bytes']} bytes, {c.get('skinning_method', 'classicLinear')} skinning)"
     return ""
 
 

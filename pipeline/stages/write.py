@@ -6,7 +6,8 @@ Layout (``<Name>`` is the source file's stem made a valid identifier)::
     /<Name>/Skeleton        Skeleton: joints, bindTransforms, restTransforms,
                             skel:animationSource -> the first clip
     /<Name>/Collider        Mesh: triangles, rightHanded, UsdSkelBindingAPI (jointIndices /
-                            jointWeights, elementSize = max influences), PhysicsCollisionAPI,
+                            jointWeights, elementSize = max influences; skinningMethod
+                            "dualQuaternion" where the source skins so), PhysicsCollisionAPI,
                             PhysicsMeshCollisionAPI (approximation "none"), colossus:parts:*,
                             customData["colossus"] = provenance
     /<Name>/<clip>          SkelAnimation per clip, one time sample per source frame
@@ -178,6 +179,8 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         k = mesh.joint_indices.shape[1]
         binding.CreateJointIndicesPrimvar(False, k).Set(Vt.IntArray.FromNumpy(mesh.joint_indices.reshape(-1).astype(np.int32)))
         binding.CreateJointWeightsPrimvar(False, k).Set(Vt.FloatArray.FromNumpy(mesh.joint_weights.reshape(-1).astype(np.float32)))
+        if mesh.skinning_method != UsdSkel.Tokens.classicLinear:  # UsdSkel's default is linear
+            binding.CreateSkinningMethodAttr().Set(mesh.skinning_method)
         geom_bind = unscale @ mesh.geom_bind  # points stay where they are; skeleton space is scaled by k
         if not np.allclose(geom_bind, np.eye(4), rtol=0, atol=1e-12):
             binding.CreateGeomBindTransformAttr(schema.matrices_to_usd(geom_bind))
@@ -206,7 +209,8 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         raise
     size = os.path.getsize(out)
     return mesh, StageReport("write", counts={"path": out, "bytes": size, "clips": len(mesh.clips),
-                                              "joints": mesh.joint_count, "parts": len(parts)})
+                                              "joints": mesh.joint_count, "parts": len(parts),
+                                              "skinning_method": mesh.skinning_method})
 
 
 def _clip_source(info: dict, mesh: SkinnedMesh) -> dict:

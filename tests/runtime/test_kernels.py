@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from references import naive
 from colossus.runtime import certify as C
+from colossus.runtime import certify_dq as CDQ
 from colossus.runtime.schema import Clip
 from colossus.runtime.kernels import bounds as B
 from colossus.runtime.kernels import interval as IV
@@ -452,3 +453,140 @@ def test_pareto_set_keeps_every_maximiser():
         e = rng.random(4)
         val = e[0] * d + w @ e[1:]
         assert val[keep].max() == pytest.approx(val.max())
+
+
+# -- dual-quaternion certificate (runtime.certify_dq) -------------------------------------------
+def random_dq_rig(rng, J=6, n=300, F=6, angle=0.6, slack=0.15, world=None):
+    """A random rig skinned by UsdSkel's DQS (naive_dqs), its spheres fitted to the frames (plus
+    ``slack`` of the radius: the in-between poses may leave them)."""
+    parents = np.array([-1] + [int(rng.integers(0, j)) for j in range(1, J)])
+    rest_t = rng.normal(size=(J, 3))
+    rest_t[0] = 0
+    rest = naive.trs(rest_t, np.tile([0, 0, 0, 1.0], (J, 1)), np.ones((J, 3)))
+    bind = naive.compose(rest, parents)
+    pts = (bind[rng.integers(0, J, n), :3, 3] + 0.4 * rng.normal(size=(n, 3))).astype(np.float32)
+    d = np.linalg.norm(pts[:, None] - bind[None, :, :3, 3], axis=2)
+    ji = np.argsort(d, 1)[:, :4].astype(np.int32)
+    w = np.exp(-np.take_along_axis(d, ji, 1) ** 2) * (rng.random((n, 4)) < 0.8)
+    w[:, 0] += 1e-3
+    jw = (w / w.sum(1, keepdims=True)).astype(np.float32)
+    owner = ji[:, 0]
+    order = np.argsort(owner, kind="stable")
+    voff = np.searchsorted(owner[order], np.arange(J + 1))
+    times = np.arange(F, dtype=float)
+    q = np.empty((F, J, 4))
+    cur = Rotation.random(J, random_state=int(rng.integers(1 << 30)))
+    for f in range(F):
+        q[f] = cur.as_quat()
+        cur = Rotation.from_rotvec(rng.normal(size=(J, 3)) * angle / 2) * cur
+    t = rest_t[None] + 0.2 * rng.normal(size=(F, J, 3))
+    s = np.ones((F, J, 3))
+    clip = Clip("c", "/c", times, t, times, q.astype(np.float32).astype(float), times, s, np.arange(J), times)
+    skel = naive.compose(naive.trs(t, clip.vr, s), parents)
+    y = naive.naive_dqs(pts, ji, jw, skel @ np.linalg.inv(bind))
+    centers, radii = np.zeros((J, 3)), np.zeros(J)
+    for p in range(J):
+        vs = order[voff[p]:voff[p + 1]]
+        loc = np.einsum("fij,fvj->fvi", np.linalg.inv(skel[:, p]), np.concatenate([y[:, vs], np.ones((F, len(vs), 1))], 2))[..., :3]
+        lo, hi = loc.reshape(-1, 3).min(0), loc.reshape(-1, 3).max(0)
+        centers[p] = (lo + hi) / 2
+        radii[p] = np.linalg.norm(loc - centers[p], axis=2).max() * (1 + slack) + 1e-3
+    rig = C.Rig(pts, ji, jw, np.eye(4), bind, rest, parents, np.arange(J), centers, radii, voff, order,
+                world=np.eye(4) if world is None else world, skinning_method="dualQuaternion")
+    return rig, clip, skel
+
+
+def _dense_dq(rig, clip, t0, t1, steps=48):
+    """(steps - 1, P) joint-space farthest distance of every part at sub-steps of [t0, t1]
+    (naive slerp and T R S; the skin by usd-core's own ``UsdSkel.SkinPoints(dualQuaternion)``)."""
+    out = []
+    for a in np.linspace(0, 1, steps + 1)[1:-1]:
+        tt = t0 + a * (t1 - t0)
+        i = min(int(np.floor(tt)), len(clip.times) - 2)
+        f = tt - i
+        skel = naive.compose(naive.trs((1 - f) * clip.vt[i] + f * clip.vt[i + 1], naive.slerp(clip.vr[i], clip.vr[i + 1], f),
+                                       _half_lerp(clip.vs[i], clip.vs[i + 1], f))[None], rig.parents)[0]
+        y = _usd_dqs(rig.points, rig.joint_indices, rig.joint_weights, (skel @ rig.inv_bind)[None], np.eye(4))[0]
+        far = np.zeros(rig.P)
+        for p in range(rig.P):
+            vs = rig.verts[rig.vert_offsets[p]:rig.vert_offsets[p + 1]]
+            N = skel[rig.part_joint[p]]
+            loc = (y[vs] - N[:3, 3]) @ np.linalg.inv(N[:3, :3]).T
+            far[p] = np.linalg.norm(loc - rig.part_centers[p], axis=1).max() if len(vs) else 0
+        out.append(far)
+    return np.array(out)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_dq_certificate_is_sound_against_dense_brute_force(seed):
+    """20 random DQS rigs: no certified interval has a dense in-between pose outside a sphere, and
+    the growth bound (a joint-space bound of the farthest vertex) is never below the dense maximum."""
+    rng = np.random.default_rng(300 + seed)
+    rig, clip, skel = random_dq_rig(rng, angle=0.3 + 0.05 * (seed % 5), slack=0.05 + 0.05 * (seed % 4))
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    assert (s.tier == 2).all()  # DQS parts are skinned exactly at the samples
+    ok = ~(s.dist > s.spheres[..., 3] * (1 + 1e-6))
+    c = CDQ.certificate(rig, clip, clip.times, s.bound, ok, 0.0, 1e-6)
+    g = CDQ.certificate(rig, clip, clip.times, s.bound, ok, 0.0, 0.0, rho=np.zeros(rig.P), growth=True, max_depth=5)
+    certified = (c.status == 1) | (c.status == 2)
+    for i in range(len(clip.times) - 1):
+        far = _dense_dq(rig, clip, clip.times[i], clip.times[i + 1]).max(0)
+        assert not (certified[i] & (far > rig.part_radii * (1 + 1e-6))).any(), (i, far, rig.part_radii)
+        assert np.all(far <= g.bound[i] * (1 + 1e-9)), (i, far, g.bound[i])
+    for f in c.failures:
+        if f["definite"]:
+            assert f["excess"] > 0
+    assert certified.mean() > 0.3  # the bound is not vacuous
+
+
+def test_dq_bound_is_tight_enough_that_one_percent_less_is_caught():
+    """The dense check has teeth: on some interval the growth bound is within 1% of the dense
+    maximum, so a bound 1% smaller (an unsound one) would fail the soundness test above."""
+    rng = np.random.default_rng(11)
+    rig, clip, skel = random_dq_rig(rng, angle=0.2)
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    g = CDQ.certificate(rig, clip, clip.times, s.bound, np.ones_like(s.bound, bool), 0.0, 0.0,
+                     rho=np.zeros(rig.P), growth=True, max_depth=8)
+    caught = False
+    for i in range(len(clip.times) - 1):
+        far = _dense_dq(rig, clip, clip.times[i], clip.times[i + 1], steps=64).max(0)
+        ends = np.maximum(s.dist[i], s.dist[i + 1])  # joint = stage space here (rigid, world = I)
+        far = np.maximum(far, ends)
+        assert np.all(far <= g.bound[i] * (1 + 1e-9))
+        caught |= bool(np.any(0.99 * g.bound[i] < far))
+    assert caught
+
+
+def test_dq_vertex_leaving_only_between_samples_by_a_rotation_is_caught_with_its_interval():
+    """A two-joint DQS limb whose child swings +0.9 rad then -0.9 rad: at both samples the tip is
+    inside the root's sphere, straight half-way it is outside; the interval is reported."""
+    parents = np.array([-1, 0])
+    rest = naive.trs([[0, 0, 0], [0, 1, 0]], [[0, 0, 0, 1.0]] * 2, np.ones((2, 3)))
+    bind = naive.compose(rest, parents)
+    y = np.linspace(1.0, 2.0, 11)
+    pts = np.c_[np.zeros_like(y), y, np.zeros_like(y)].astype(np.float32)
+    ji = np.c_[np.ones(11, np.int32), np.zeros(11, np.int32)]
+    jw = np.c_[np.full(11, 0.8), np.full(11, 0.2)].astype(np.float32)  # blended: DQS, not LBS, decides
+    qz = Rotation.from_rotvec([[0, 0, 0.9], [0, 0, -0.9]]).as_quat()
+    times = np.array([0.0, 1.0])
+    clip = Clip("swing", "/swing", times, np.tile([[[0, 0, 0], [0, 1, 0]]], (2, 1, 1)).astype(float), times,
+                np.stack([np.tile([0, 0, 0, 1.0], (2, 1)), np.tile([0, 0, 0, 1.0], (2, 1))], 0), times,
+                np.ones((2, 2, 3)), np.array([0, 1]), times)
+    clip.vr[:, 1] = qz
+    skel = naive.compose(naive.trs(clip.vt, clip.vr, clip.vs), parents)
+    yk = naive.naive_dqs(pts, ji, jw, skel @ np.linalg.inv(bind))
+    c = np.array([0.0, 0.5, 0.0])
+    r = np.linalg.norm(yk - c, axis=2).max() * (1 + 1e-6)
+    rig = C.Rig(pts, ji, jw, np.eye(4), bind, rest, parents, [0], c[None], [r], [0, 11], np.arange(11),
+                skinning_method="dualQuaternion")
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    ok = ~(s.bound > s.spheres[..., 3] * (1 + 1e-6))
+    assert ok.all()  # both samples inside
+    mid = naive.naive_dqs(pts, ji, jw, naive.compose(naive.trs(clip.vt[:1], np.tile([0, 0, 0, 1.0], (1, 2, 1)),
+                                                               clip.vs[:1]), parents) @ np.linalg.inv(bind))
+    assert np.linalg.norm(mid[0] - c, axis=1).max() > r * 1.05  # outside half-way (by DQS)
+    res = CDQ.certificate(rig, clip, times, s.bound, ok, 0.0, 1e-6)
+    assert res.status[0, 0] == 3 and len(res.failures) == 1
+    f = res.failures[0]
+    assert (f["t0"], f["t1"]) == (0.0, 1.0) and f["excess"] > 0.05 and 0 <= f["vertex"] < 11 and f["definite"]
+    assert abs(f["time"] - 0.5) <= 0.1

@@ -1,0 +1,362 @@
+"""The continuous certificate for dual-quaternion skinning (``primvars:skel:skinningMethod =
+"dualQuaternion"``): every vertex of every part inside its sphere at every time between two
+samples of a clip, as UsdSkel interpolates the joints and skins them (``_SkinPointsDQS``,
+:func:`runtime.kernels.skin.dq_parts`).  :func:`certificate` dispatches here for a
+dual-quaternion :class:`runtime.certify.Rig` (and to :func:`runtime.certify.continuous` for a
+linear one); at the samples themselves
+:func:`runtime.certify.sampled` skins every dual-quaternion part exactly (tests K and D bound
+linear blends only: a DQS vertex is not a convex combination of its joints' transforms).
+
+The bound (a Lipschitz bound in time, with subdivision)
+-------------------------------------------------------
+Notation.  Over one sample interval, time is normalised to ``u in [0, 1]``; a sub-interval
+``[a, b]`` has length ``l = b - a`` in those units.  Joint ``j``'s skinning transform is
+``M_j(u) = K_j(u) B_j^-1`` (``K_j`` its skeleton-space transform, ``B_j`` its bind), with linear
+part ``A_j = R_j S_j`` (UsdSkel's split: ``R_j`` a proper rotation, ``S_j = R_j^T A_j``) and
+translation ``t_j``; ``q_j`` the unit quaternion of ``R_j``.  A vertex has non-negative weights
+``w_j`` (its pivot, the first of the largest weight ``w_max``) and bind position ``p = G p_mesh``
+(skeleton space).  UsdSkel's skinned point is ``x = R(b^) s + T(b, c)`` with ``b = sum s_j w_j
+q_j``, ``c = sum s_j w_j (0, t_j / 2) q_j`` (``s_j = -1`` where ``q_j . q_piv < 0``), ``b^ =
+b / |b|``, ``T(b, c) = 2 Im(c b*) / |b|^2`` and ``s = sum w_j S_j p`` (or ``p`` when no joint of
+the pose has a scale).  Part ``P`` of joint ``J`` has the fixed joint-space ball ``(c_P, r_P)``;
+its skeleton-space centre is ``C(u) = K_J(u) c_P`` and ``o = B_J c_P`` is that centre at bind.
+
+Per-joint bounds over the interval (from :func:`runtime.certify.factor_bounds`: ``n0, n1`` of
+each local factor and of its inverse, the translation change ``dt``), by the product rule along
+the root path: ``||A_j|| <= N_j = nK_j ||B_j^-1||``, ``sigma_min(A_j) >= m_j = lK_j
+sigma_min(B_j^-1)`` and ``||A_j'|| <= dK_j ||B_j^-1||`` with ``nK_j = nK_par n0_j``, ``lK_j =
+lK_par / n0inv_j``, ``dK_j = dK_par n0_j + nK_par n1_j``.  Then
+
+1. ``eta_j = max(N_j - 1, 1 - m_j) + 1e-5`` bounds ``||S_j - I||`` (the eigenvalues of ``S_j``
+   are ``A_j``'s singular values where ``det A_j > 0``, checked at the ends: it cannot change
+   sign while ``m_j > 0``; ``1e-5`` covers rotation matrices made from float32 quaternions
+   that are not exactly unit, GfSlerp's linear branch included).
+2. ``omega_j = ||A_j'|| / sigma_min(A_j)`` bounds the angular speed of ``R_j``: with ``R^T R' =
+   W`` skew, ``R^T A' - A'^T R = W S + S W``; in ``S``'s eigenbasis ``W_ik (s_i + s_k) = K_ik``,
+   and ``|w|^2 = sum_{i<k} W_ik^2 <= sum K_ik^2 / (2 s_min)^2 = ||K||_2^2 / (2 s_min)^2 <=
+   ||A'||^2 / s_min^2``.  So ``|q_j'| <= omega_j / 2``.
+3. No hemisphere flip: ``|q_j . q_piv|`` is Lipschitz with constant ``(omega_j + omega_piv) / 2``;
+   where ``|q_j . q_piv|(a) + |q_j . q_piv|(b) > l (omega_j + omega_piv) / 2`` for every
+   (joint, pivot) pair of the part it never reaches 0 on ``[a, b]``, so every ``s_j`` is constant
+   and ``x(u)`` is continuous there (where it may flip, UsdSkel's DQS jumps: the sub-interval is
+   subdivided and, at the depth limit, left undecided).
+4. ``|b| >= w_max``: ``b . q_piv = sum w_j |q_j . q_piv| >= w_max`` (every flipped term has a
+   non-negative dot; needs non-negative weights, else the interval is undecided).  So UsdSkel
+   never takes its identity branch (``|b| < 1e-10``).
+5. Right equivariance (rigid ``D = translate(o)``: DQ(M D) = DQ(M) DQ(D), the flips and norms
+   unchanged): with ``x° = R(b^) p + T(b, c)`` (the point if every ``S_j`` were ``I``),
+   ``x° - C = R(b^)(p - o) + T(b, c_D) - T(b, c_e)``, where ``c_D``, ``c_e`` are the blends of
+   the translations ``D_j = M_j(o) - M_J(o) = Lin(K_J)(Y_j(o) - c_P)`` (``Y_j = K_J^-1 K_j B_j^-1``,
+   the relative transform; ``M_J(o) = C``) and ``e_j = R_j (S_j - I) o``, because ``T`` is linear
+   in the translations, ``T(b, (0, C/2) b) = C``, and ``R_j o + t_j = M_j(o) - e_j``.
+6. Constants: ``|x - x°| = |s - p| <= (sum w_j eta_j + |sum w_j - 1|) |p|`` (0 without a scale
+   flag) and ``|T(b, c_e)| <= 2 |c_e| / |b| <= sum w_j eta_j |o| / w_max``; their sum is
+   ``eps_v``.
+7. Lipschitz: ``h(u) = R(b^)(p - o) + T(b, c_D)`` has ``|h'| <= L_v = Omega |p - o| + 2 |c_D'| /
+   w_max + 6 |c_D| |b'| / w_max^2`` with ``|b'| <= sum w_j omega_j / 2``, ``Omega = 2 |b'| /
+   w_max`` (the angular speed of ``R(b^)``: ``|(b/|b|)'| <= |b'| / |b|``), ``|c_D| <= sum w_j
+   Dm_j / 2``, ``|c_D'| <= sum w_j (Dv_j + Dm_j omega_j / 2) / 2`` (``d_j = (0, D_j/2) q_j``), and
+   ``|D_j| <= Dm_j = nK_J E_j``, ``|D_j'| <= Dv_j = dK_J E_j + nK_J V_j``.  ``E_j`` bounds
+   ``|Y_j(o) - c_P|`` on the interval (the end distances plus the chord deviation of
+   :func:`runtime.kernels.interval.chain_bounds`, run on the points ``B_j^-1 o`` with radius 0),
+   ``V_j`` the speed of ``Y_j(o)``: along the chain of local factors from ``j`` to ``J``
+   (innermost first) a point ``z`` moved by a forward factor ``F z + t`` gains ``|(Fz + t)'| <=
+   n0 |z'| + n1 |z|max + dt`` and by an inverse one ``|(F^-1 (z - t))'| <= n0inv |z'| + n1inv
+   (|z|max + |t|max) + n0inv dt``.
+8. Hence on ``[a, b]``, for every vertex, ``|x(u) - C(u)| <= |h(u)| + eps_v <= (|h(a)| + |h(b)|)
+   / 2 + L_v l / 2 + eps_v <= (g(a) + g(b)) / 2 + L_v l / 2 + 2 eps_v`` with ``g = |x - C|``
+   skinned exactly at the ends (the runtime's kernel); per part, ``U = (G(a) + G(b)) / 2 +
+   max_v (L_v l / 2 + 2 eps_v)`` with ``G`` the part's exact farthest distance.  In ``J``'s space
+   ``|y - c_P| <= |x - C| / sigma_min(K_J) <= U / lK_J``, held to the same radius ``rho`` as the
+   linear certificate (:func:`runtime.certify.continuous`: the stage sphere then holds).
+
+Where the bound's hypotheses fail it never certifies (status 4, undecided, reported as a failure):
+scales that change over the interval (UsdSkel rounds their lerp to half precision, a step
+function), a skinning transform far from rigid (``eta_j > ETA_MAX``) or mirrored, negative
+weights.  Subdivision halves ``l`` (the bounds above hold on the whole interval, so on every part
+of it) up to ``max_depth`` times.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import certify as C
+from .kernels import interval as IV
+from .kernels import skin as SK
+
+#: Largest ``||S_j - I||`` (stretch of a skinning transform) the Lipschitz bound accepts.
+ETA_MAX = 1e-3
+#: Slack of eta for rotation matrices from float32 (and GfSlerp-lerped) quaternions.
+ETA_PAD = 1e-5
+#: Relative padding of every bound (float64 rounding).
+ROUND = 1e-9
+
+
+def _joint_bounds(rig, fac):
+    """Per (interval, joint): nK, lK, dK (skeleton-space linear part norm, smallest singular
+    value, derivative norm) and, for the skinning transform, eta, omega (items 1-2)."""
+    fw, iv = fac["fw"], fac["iv"]
+    I, Jn = fw.shape[:2]
+    nK, lK, dK = np.empty((I, Jn)), np.empty((I, Jn)), np.empty((I, Jn))
+    with np.errstate(all="ignore"):
+        for j in rig.topo:
+            p = rig.parents[j]
+            if p < 0:
+                nK[:, j], lK[:, j], dK[:, j] = fw[:, j, 0], 1.0 / iv[:, j, 0], fw[:, j, 1]
+            else:
+                nK[:, j] = nK[:, p] * fw[:, j, 0]
+                lK[:, j] = lK[:, p] / iv[:, j, 0]
+                dK[:, j] = dK[:, p] * fw[:, j, 0] + nK[:, p] * fw[:, j, 1]
+        sv = np.linalg.svd(rig.inv_bind[:, :3, :3], compute_uv=False)
+        Bn, Bs = sv[:, 0] * (1 + 1e-12), sv[:, -1] * (1 - 1e-12)
+        N, m = nK * Bn, lK * Bs
+        eta = np.maximum(N - 1.0, 1.0 - m) + ETA_PAD
+        omega = dK * Bn / m * (1 + ROUND)
+    return nK, lK, dK, eta, omega
+
+
+def _path_speeds(rig, fac, pj_point):
+    """(I, M) speed bound ``V`` of ``Y_b(z0)`` for every (part, joint) pair (item 7), ``z0 =
+    pj_point`` in the joint's own space."""
+    off, pj, pd, _ = rig.paths()
+    fw, iv, dt = fac["fw"], fac["iv"], fac["dt"]
+    tmax = np.maximum(np.linalg.norm(fac["L0"][..., :3, 3], axis=-1), np.linalg.norm(fac["L1"][..., :3, 3], axis=-1))
+    I, M = fw.shape[0], len(off) - 1
+    V = np.zeros((I, M))
+    with np.errstate(all="ignore"):
+        for k in range(M):
+            z = np.full(I, np.linalg.norm(pj_point[k]))
+            v = np.zeros(I)
+            for e in range(off[k], off[k + 1]):
+                j, d = pj[e], pd[e]
+                if d > 0:
+                    v = fw[:, j, 0] * v + fw[:, j, 1] * z + dt[:, j]
+                    z = fw[:, j, 0] * z + tmax[:, j]
+                else:
+                    v = iv[:, j, 0] * v + iv[:, j, 1] * (z + tmax[:, j]) + iv[:, j, 0] * dt[:, j]
+                    z = iv[:, j, 0] * (z + tmax[:, j])
+            V[:, k] = v * (1 + ROUND)
+    return V
+
+
+class _Times:
+    """Skeleton transforms, exact part distances and joint quaternions at any time of the clip,
+    computed on demand (and kept)."""
+
+    def __init__(self, rig, clip, times, fac):
+        self.rig = rig
+        self.mats = C._Mats(rig, clip, times, fac)
+        self.dist = {}   # t -> (P,) skeleton-space farthest |x - C|
+        self.quat = {}   # t -> (J, 4) UsdSkel's joint quaternions (w, x, y, z)
+
+    def skel_at(self, t):
+        return self.mats.skel_at(t)
+
+    def fill(self, ts):
+        rig = self.rig
+        ts = sorted({float(t) for t in ts if float(t) not in self.dist})
+        if not ts:
+            return
+        skel = np.stack([self.skel_at(t) for t in ts])  # (T, J, 4, 4)
+        skin = skel @ rig.inv_bind
+        real, _, _, _ = SK.dq_parts(skin)
+        J = rig.part_joint
+        KJ = skel[:, J]
+        cen = np.einsum("tpij,pj->tpi", KJ[..., :3, :3], rig.part_centers) + KJ[..., :3, 3]
+        d, _ = SK.part_farthest(rig.points, rig.joint_indices, rig.joint_weights,
+                                SK.fold_dq(skin, rig.geom_bind), rig.vert_offsets, rig.verts, cen)
+        for n, t in enumerate(ts):
+            self.dist[t] = d[n]
+            self.quat[t] = real[n]
+
+
+def certificate(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel: float, **kw) -> C.Continuous:
+    """The continuous certificate of ``rig``'s own skinning method: :func:`continuous` for a
+    dual-quaternion rig, :func:`runtime.certify.continuous` for a linear one (the one entry the
+    frame proof and the spheres stage call)."""
+    if rig.skinning_method == SK.CLASSIC_LINEAR:
+        return C.continuous(rig, clip, times, frame_bound, frame_ok, tol_abs, tol_rel, **kw)
+    if rig.skinning_method != SK.DUAL_QUATERNION:
+        raise ValueError(f"skinning method {rig.skinning_method!r}: expected one of {SK.METHODS}")
+    return continuous(rig, clip, times, frame_bound, frame_ok, tol_abs, tol_rel, **kw)
+
+
+def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel: float, rho=None,
+               growth: bool = False, max_depth: int = C.MAX_DEPTH, frame_bound_space: str = "stage") -> C.Continuous:
+    """:func:`runtime.certify.continuous` for a dual-quaternion rig (the bound: module docstring).
+
+    Same parameters and result; ``frame_bound`` is not used (the ends of every sub-interval are
+    skinned exactly).  Status 1: certified on the whole interval; 2: after subdivision; 3: a
+    sub-interval end is outside (a definite failure); 4: undecided (the hypotheses fail, or the
+    depth limit); 5: a sample at an end already fails."""
+    times = np.asarray(times, dtype=np.float64)
+    F, P = len(times), rig.P
+    I = F - 1
+    if I <= 0 or P == 0:
+        z = np.zeros((max(I, 0), P))
+        return C.Continuous(z.astype(np.int8), z, z)
+    bd = rig.bounds
+    fac = C.factor_bounds(clip, times, rig.rest_local)
+    nK, lK, dK, eta, omega = _joint_bounds(rig, fac)
+    Jp = rig.part_joint
+
+    # -- the radius held (as runtime.certify.continuous): scale bounds of N_J = world @ K_J
+    with np.errstate(all="ignore"):
+        s_hi = nK * C._norm2(rig.world[:3, :3])
+        s_lo = lK * C._sigma_min(rig.world[:3, :3])
+        iso = fac["iso"].copy()
+        for j in rig.topo:
+            p = rig.parents[j]
+            if p >= 0:
+                iso[:, j] &= iso[:, p]
+        sw = np.linalg.svd(rig.world[:3, :3], compute_uv=False)
+        iso &= bool(sw[0] - sw[-1] <= 1e-12 * sw[0])
+        ratio = np.where(iso, 1.0, s_lo / s_hi)
+        r = rig.part_radii
+        if rho is None:
+            rho = r[None] * (1.0 + tol_rel) * ratio[:, Jp] * (1 - 1e-12) + tol_abs / s_hi[:, Jp]
+        else:
+            rho = np.asarray(rho, dtype=np.float64) * ratio[:, Jp] * (1 - 1e-12)
+    rho = np.broadcast_to(np.asarray(rho, dtype=np.float64), (I, P)).copy()
+
+    # -- hypotheses per interval (smooth, near-rigid skinning transforms, non-negative weights)
+    smooth = ~(fac["eps"] > 0).any(axis=(1, 2))
+    ji, jw = rig.joint_indices, rig.joint_weights.astype(np.float64)
+    used = np.unique(ji[jw != 0])
+    rigid = (eta[:, used] <= ETA_MAX).all(axis=1) if len(used) else np.ones(I, bool)
+    nonneg = bool((jw >= 0).all())
+
+    # -- per (part, joint) pair: E (bound on |Y_b(o) - c_P|) and V (its speed) (item 7)
+    pair_part = np.repeat(np.arange(P), np.diff(bd.pj_offsets))
+    o_bind = np.einsum("pij,pj->pi", rig.bind[Jp][:, :3, :3], rig.part_centers) + rig.bind[Jp][:, :3, 3]
+    M = len(bd.pj_joint)
+    z0 = np.zeros((M, 3))
+    if M:
+        ib = rig.inv_bind[bd.pj_joint]
+        z0 = np.einsum("mij,mj->mi", ib[:, :3, :3], o_bind[pair_part]) + ib[:, :3, 3]
+    e0, e1, delta, lam, pert = (np.zeros((I, M)) for _ in range(5))
+    if M:
+        off, pj, pd, _ = rig.paths()
+        IV.chain_bounds(fac["L0"], fac["L1"], fac["Li0"], fac["Li1"], fac["fw"], fac["iv"], fac["dt"], fac["eps"],
+                        off, pj, pd, np.ascontiguousarray(z0), np.zeros(M), pair_part, bd.part_centers,
+                        e0, e1, delta, lam, pert)
+    E = (np.maximum(e0, e1) + delta + pert) * (1 + ROUND)
+    V = _path_speeds(rig, fac, z0) if M else np.zeros((I, 0))
+    Dm = nK[:, Jp[pair_part]] * E
+    Dv = dK[:, Jp[pair_part]] * E + nK[:, Jp[pair_part]] * V
+
+    # -- per part: Lipschitz constant L and constant eps (items 4-7), per interval
+    G = rig.geom_bind
+    pbind = rig.points.astype(np.float64) @ G[:3, :3].T + G[:3, 3]
+    Lp = np.full((I, P), np.inf)
+    Ep = np.full((I, P), np.inf)
+    pairs = []  # per part: (joint, pivot) index arrays for the flip test
+    with np.errstate(all="ignore"):
+        for p in range(P):
+            vs = rig.verts[rig.vert_offsets[p]:rig.vert_offsets[p + 1]]
+            if len(vs) == 0:
+                Lp[:, p] = 0.0
+                Ep[:, p] = 0.0
+                pairs.append((np.zeros(0, np.int64), np.zeros(0, np.int64)))
+                continue
+            lo, hi = bd.pj_offsets[p], bd.pj_offsets[p + 1]
+            col = np.full(len(rig.bind), lo, dtype=np.int64)  # joint -> its pair index in the part
+            col[bd.pj_joint[lo:hi]] = np.arange(lo, hi)
+            w = np.abs(jw[vs])
+            jj = ji[vs]
+            live = w != 0
+            k = np.where(live, col[jj], lo)
+            piv = jj[np.arange(len(vs)), np.argmax(jw[vs], axis=1)]
+            wmax = w.max(1)
+            om = np.where(live[None], omega[:, jj], 0.0)  # (I, n, k); padding never read
+            et = np.where(live[None], eta[:, jj], 0.0)
+            sw_ = (w[None] * et).sum(2)
+            bdot = 0.5 * (w[None] * om).sum(2)
+            Om = 2.0 * bdot / wmax[None]
+            dm = np.where(live[None], Dm[:, k], 0.0)
+            dv = np.where(live[None], Dv[:, k], 0.0)
+            cD = 0.5 * (w[None] * dm).sum(2)
+            cDd = 0.5 * (w[None] * (dv + dm * om / 2)).sum(2)
+            dpo = np.linalg.norm(pbind[vs] - o_bind[p], axis=1)
+            L = Om * dpo[None] + 2.0 * cDd / wmax[None] + 6.0 * cD * bdot / wmax[None] ** 2
+            eps_v = (sw_ + np.abs(jw[vs].sum(1) - 1.0)[None]) * np.linalg.norm(pbind[vs], axis=1)[None] \
+                + sw_ * np.linalg.norm(o_bind[p]) / wmax[None]
+            Lp[:, p] = np.max(L, axis=1) * (1 + ROUND)
+            Ep[:, p] = np.max(eps_v, axis=1) * (1 + ROUND)
+            a, b = np.broadcast_to(piv[:, None], jj.shape)[live], jj[live]
+            u = np.unique(np.c_[a, b][a != b], axis=0)
+            pairs.append((u[:, 1].astype(np.int64), u[:, 0].astype(np.int64)))
+    ok_int = smooth & rigid & nonneg
+    Lp[~np.isfinite(Lp)] = np.inf
+
+    ok = np.asarray(frame_ok, dtype=bool)
+    ends_ok = ok[:-1] & ok[1:]
+    status = np.full((I, P), -1, dtype=np.int8)
+    status[~ends_ok] = 5
+    if growth:
+        status[:] = -1
+    out = C.Continuous(status, np.full((I, P), np.inf), rho, ratio=ratio[:, Jp].copy())
+    tm = _Times(rig, clip, times, fac)
+    nodes = [(int(i), int(p), float(times[i]), float(times[i + 1]), 0) for i, p in np.argwhere(status == -1)]
+    worst, deepest, found = {}, {}, {}
+    bad_hyp = set()
+    while nodes:
+        tm.fill([x for n in nodes for x in (n[2], n[3])])
+        nxt = []
+        for i, p, a, b, depth in nodes:
+            key = (i, p)
+            if out.status[i, p] in (3, 4) and not growth:
+                continue
+            if not ok_int[i]:
+                bad_hyp.add(key)
+                out.status[i, p] = 4
+                continue
+            l = (b - a) / (times[i + 1] - times[i])
+            jA, jP = pairs[p]
+            qa, qb = tm.quat[a], tm.quat[b]
+            if len(jA):
+                da = np.abs((qa[jA] * qa[jP]).sum(1))
+                db = np.abs((qb[jA] * qb[jP]).sum(1))
+                no_flip = bool(np.all(da + db > 0.5 * l * (omega[i, jA] + omega[i, jP]) * (1 + ROUND)))
+            else:
+                no_flip = True
+            Ga, Gb = tm.dist[a][p], tm.dist[b][p]
+            U = ((Ga + Gb) / 2 + Lp[i, p] * l / 2 + 2 * Ep[i, p]) * (1 + ROUND) / (lK[i, Jp[p]] * (1 - 1e-12))
+            if no_flip and U <= rho[i, p]:
+                worst[key] = max(worst.get(key, -np.inf), U)
+                deepest[key] = max(deepest.get(key, 0), depth)
+                continue
+            if not growth and depth > 0 and max(Ga, Gb) / lK[i, Jp[p]] > rho[i, p]:
+                t_end = a if Ga >= Gb else b
+                d, R, v = C.sampled_exact(rig, tm.skel_at(t_end)[None], [p])
+                if d[0] - R[0] * (1 + tol_rel) - tol_abs > 0:
+                    out.status[i, p] = 3
+                    found[key] = (t_end, int(v[0]), float(d[0] - R[0]), float(R[0]))
+                    continue
+            if depth >= max_depth:
+                worst[key] = max(worst.get(key, -np.inf), U if no_flip else np.inf)
+                deepest[key] = depth
+                if not growth:
+                    out.status[i, p] = 4
+                continue
+            m = 0.5 * (a + b)
+            nxt += [(i, p, a, m, depth + 1), (i, p, m, b, depth + 1)]
+            out.subdivided += 1
+        nodes = nxt
+    for i, p in np.argwhere(out.status != 5):
+        key = (int(i), int(p))
+        if key in bad_hyp:
+            out.status[i, p] = 4
+            out.bound[i, p] = np.inf
+            continue
+        if out.status[i, p] == -1:
+            out.status[i, p] = 1 if deepest.get(key, 0) == 0 else 2
+        out.bound[i, p] = worst.get(key, np.inf) if out.status[i, p] != 3 else np.inf
+    for i, p in np.argwhere((out.status == 3) | (out.status == 4)):
+        f = C._describe_failure(rig, clip, times, int(i), int(p), out, tm, found.get((int(i), int(p))))
+        if (int(i), int(p)) in bad_hyp:
+            f["reason"] = ("the dual-quaternion bound's hypotheses fail on this interval (animated scales, a "
+                           "stretched or mirrored skinning transform, or negative weights): not certified")
+        out.failures.append(f)
+    return out
