@@ -28,9 +28,11 @@ sigma_min(B_j^-1)`` and ``||A_j'|| <= dK_j ||B_j^-1||`` with ``nK_j = nK_par n0_
 lK_par / n0inv_j``, ``dK_j = dK_par n0_j + nK_par n1_j``.  Then
 
 1. ``eta_j = max(N_j - 1, 1 - m_j) + 1e-5`` bounds ``||S_j - I||`` (the eigenvalues of ``S_j``
-   are ``A_j``'s singular values where ``det A_j > 0``, checked at the ends: it cannot change
-   sign while ``m_j > 0``; ``1e-5`` covers rotation matrices made from float32 quaternions
-   that are not exactly unit, GfSlerp's linear branch included).
+   are ``A_j``'s singular values where ``det A_j > 0``, checked at every sample: it cannot change
+   sign in between while ``m_j > 0``; ``1e-5``, and a factor ``1 + 1e-5`` on every local
+   factor's ``n0``, ``n1`` and ``1 / n0inv``, cover rotation matrices made from float32
+   quaternions that are not exactly unit, GfSlerp's linear branch included: ``1 - |q|^2 <=
+   5e-6`` there).
 2. ``omega_j = ||A_j'|| / sigma_min(A_j)`` bounds the angular speed of ``R_j``: with ``R^T R' =
    W`` skew, ``R^T A' - A'^T R = W S + S W``; in ``S``'s eigenbasis ``W_ik (s_i + s_k) = K_ik``,
    and ``|w|^2 = sum_{i<k} W_ik^2 <= sum K_ik^2 / (2 s_min)^2 = ||K||_2^2 / (2 s_min)^2 <=
@@ -99,15 +101,16 @@ def _joint_bounds(rig, fac):
     fw, iv = fac["fw"], fac["iv"]
     I, Jn = fw.shape[:2]
     nK, lK, dK = np.empty((I, Jn)), np.empty((I, Jn)), np.empty((I, Jn))
+    pad = 1.0 + ETA_PAD  # per factor: rotation matrices of float32 (or GfSlerp-lerped) quaternions
     with np.errstate(all="ignore"):
         for j in rig.topo:
             p = rig.parents[j]
             if p < 0:
-                nK[:, j], lK[:, j], dK[:, j] = fw[:, j, 0], 1.0 / iv[:, j, 0], fw[:, j, 1]
+                nK[:, j], lK[:, j], dK[:, j] = fw[:, j, 0] * pad, 1.0 / (iv[:, j, 0] * pad), fw[:, j, 1] * pad
             else:
-                nK[:, j] = nK[:, p] * fw[:, j, 0]
-                lK[:, j] = lK[:, p] / iv[:, j, 0]
-                dK[:, j] = dK[:, p] * fw[:, j, 0] + nK[:, p] * fw[:, j, 1]
+                nK[:, j] = nK[:, p] * fw[:, j, 0] * pad
+                lK[:, j] = lK[:, p] / (iv[:, j, 0] * pad)
+                dK[:, j] = (dK[:, p] * fw[:, j, 0] + nK[:, p] * fw[:, j, 1]) * pad
         sv = np.linalg.svd(rig.inv_bind[:, :3, :3], compute_uv=False)
         Bn, Bs = sv[:, 0] * (1 + 1e-12), sv[:, -1] * (1 - 1e-12)
         N, m = nK * Bn, lK * Bs
@@ -226,6 +229,13 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
     used = np.unique(ji[jw != 0])
     rigid = (eta[:, used] <= ETA_MAX).all(axis=1) if len(used) else np.ones(I, bool)
     nonneg = bool((jw >= 0).all())
+    tm = _Times(rig, clip, times, fac)
+    # det A_j > 0 at every sample (then on the whole interval: sigma_min(A_j) >= m_j > 0 there), so
+    # S_j is positive definite and eta bounds ||S_j - I|| (a mirrored joint has S_j near -I)
+    dets = np.array([np.linalg.det((tm.skel_at(t) @ rig.inv_bind)[used, :3, :3]) for t in times]) if len(used) \
+        else np.ones((F, 0))
+    proper = (dets > 0).all(axis=1)
+    rigid &= proper[:-1] & proper[1:]
 
     # -- per (part, joint) pair: E (bound on |Y_b(o) - c_P|) and V (its speed) (item 7)
     pair_part = np.repeat(np.arange(P), np.diff(bd.pj_offsets))
@@ -297,7 +307,6 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
     if growth:
         status[:] = -1
     out = C.Continuous(status, np.full((I, P), np.inf), rho, ratio=ratio[:, Jp].copy())
-    tm = _Times(rig, clip, times, fac)
     nodes = [(int(i), int(p), float(times[i]), float(times[i + 1]), 0) for i, p in np.argwhere(status == -1)]
     worst, deepest, found = {}, {}, {}
     bad_hyp = set()

@@ -590,3 +590,33 @@ def test_dq_vertex_leaving_only_between_samples_by_a_rotation_is_caught_with_its
     f = res.failures[0]
     assert (f["t0"], f["t1"]) == (0.0, 1.0) and f["excess"] > 0.05 and 0 <= f["vertex"] < 11 and f["definite"]
     assert abs(f["time"] - 0.5) <= 0.1
+
+
+@pytest.mark.parametrize("case", ["animated_scale", "mirrored_bind", "negative_weight"])
+def test_dq_certificate_fails_closed_outside_its_hypotheses(case):
+    """Where the DQS Lipschitz bound's hypotheses fail (scales that change between samples, a
+    mirrored skinning transform, negative weights) nothing is certified: undecided, with a reason."""
+    rng = np.random.default_rng(21)
+    rig, clip, skel = random_dq_rig(rng, angle=0.2, slack=0.5)
+    if case == "animated_scale":
+        clip.vs[1:] = np.float16(1.25)
+        skel = naive.compose(naive.trs(clip.vt, clip.vr, clip.vs), rig.parents)
+    elif case == "mirrored_bind":
+        bind = rig.bind.copy()
+        bind[2, :3, 0] *= -1
+        rig = C.Rig(rig.points, rig.joint_indices, rig.joint_weights, rig.geom_bind, bind, rig.rest_local, rig.parents,
+                    rig.part_joint, rig.part_centers, rig.part_radii, rig.vert_offsets, rig.verts,
+                    skinning_method="dualQuaternion")
+    else:
+        jw = rig.joint_weights.copy()
+        jw[0, 1] = -0.01
+        rig = C.Rig(rig.points, rig.joint_indices, jw, rig.geom_bind, rig.bind, rig.rest_local, rig.parents,
+                    rig.part_joint, rig.part_centers, rig.part_radii, rig.vert_offsets, rig.verts,
+                    skinning_method="dualQuaternion")
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    c = CDQ.certificate(rig, clip, clip.times, s.bound, np.ones_like(s.bound, bool), 0.0, 1e-6)
+    bad = np.ones(len(clip.times) - 1, bool)
+    if case == "animated_scale":
+        bad[1:] = False  # only the first interval's scales change
+    assert (c.status[bad] == 4).all() and not ((c.status[bad] == 1) | (c.status[bad] == 2)).any()
+    assert all("hypotheses" in f.get("reason", "") for f in c.failures if f["interval"] in np.flatnonzero(bad))
