@@ -88,7 +88,7 @@ class Rig:
 
     def skin_mats(self, skel) -> np.ndarray:
         """(F, J, 12) folded stage-space skinning transforms ``world @ skel @ inv_bind @ geom_bind``
-        (a dual-quaternion rig: the (F, J, DQ_WIDTH) layout of :func:`runtime.kernels.skin.fold_dq`)."""
+        (a dual-quaternion rig: the (F, J, 1, DQ_WIDTH) layout of :func:`runtime.kernels.skin.fold_dq`)."""
         if self.skinning_method != SK.CLASSIC_LINEAR:
             return SK.fold_method(self.skinning_method, skel @ self.inv_bind, self.geom_bind, self.world)
         return SK.fold(self.world @ skel @ self.inv_bind @ self.geom_bind)

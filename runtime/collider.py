@@ -116,7 +116,7 @@ class Pose:
         # local_to_world @ skinning_transforms (kernels.skin.fold); dual-quaternion meshes: the
         # wider layout of kernels.skin.fold_dq, which the one kernel's method switch reads
         self._dq = d.skinning_method == SK.DUAL_QUATERNION
-        self._skin_world = np.empty((1, J, SK.DQ_WIDTH if self._dq else 12))
+        self._skin_world = np.empty((1, J, 1, SK.DQ_WIDTH)) if self._dq else np.empty((1, J, 12))
         self._lbs_world = np.empty((1, J, 12)) if self._dq else self._skin_world
         self.joint_world = np.empty((J, 4, 4))
         self._world1 = self.joint_world.reshape(1, J, 4, 4)

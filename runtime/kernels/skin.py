@@ -3,8 +3,9 @@ with a method switch): the runtime's posing, the frame proof, the continuous cer
 import's spheres stage all skin through this module.
 
 Dual-quaternion skinning (UsdSkel's ``primvars:skel:skinningMethod = "dualQuaternion"``) uses a
-wider layout of the same ``(F, J, w)`` array (:func:`fold_dq`, ``w = DQ_WIDTH``): the per-vertex
-function ``_skin_vertex`` picks ``_lbs`` or ``_dqs`` by the array's width, so every loop below
+wider layout of the folded transforms (:func:`fold_dq`, ``(F, J, 1, DQ_WIDTH)``): the per-vertex
+function ``_skin_vertex`` picks ``_lbs`` or ``_dqs`` by the array's dimension when numba types
+the loop (a numba ``overload``: each loop compiles only the method it is called with), so every loop below
 (and every caller of them) skins with whichever method its transforms were folded for
 (:func:`fold_method`).  ``_dqs`` follows usd-core's ``_SkinPointsDQS`` step by step (see its
 docstring and :func:`dq_parts`); its readable reference is ``tests/references/naive.py::naive_dqs``
@@ -46,6 +47,7 @@ import math
 
 import numpy as np
 from numba import njit, prange
+from numba.extending import overload
 
 from .config import FASTMATH_PROOF
 
@@ -104,8 +106,8 @@ def _dqs(v, f, points, ji, jw, m):
             best = np.float64(jw[v, i])
             piv = i
     jp = ji[v, piv]
-    pw, pxq, pyq, pzq = m[f, jp, 12], m[f, jp, 13], m[f, jp, 14], m[f, jp, 15]
-    scaled = m[f, 0, 44] != 0.0
+    pw, pxq, pyq, pzq = m[f, jp, 0, 12], m[f, jp, 0, 13], m[f, jp, 0, 14], m[f, jp, 0, 15]
+    scaled = m[f, 0, 0, 44] != 0.0
     sx = 0.0
     sy = 0.0
     sz = 0.0
@@ -123,23 +125,23 @@ def _dqs(v, f, points, ji, jw, m):
             continue
         j = ji[v, i]
         if scaled:
-            sx += w * (m[f, j, 0] * px + m[f, j, 1] * py + m[f, j, 2] * pz + m[f, j, 3])
-            sy += w * (m[f, j, 4] * px + m[f, j, 5] * py + m[f, j, 6] * pz + m[f, j, 7])
-            sz += w * (m[f, j, 8] * px + m[f, j, 9] * py + m[f, j, 10] * pz + m[f, j, 11])
-        if m[f, j, 12] * pw + m[f, j, 13] * pxq + m[f, j, 14] * pyq + m[f, j, 15] * pzq < 0.0:
+            sx += w * (m[f, j, 0, 0] * px + m[f, j, 0, 1] * py + m[f, j, 0, 2] * pz + m[f, j, 0, 3])
+            sy += w * (m[f, j, 0, 4] * px + m[f, j, 0, 5] * py + m[f, j, 0, 6] * pz + m[f, j, 0, 7])
+            sz += w * (m[f, j, 0, 8] * px + m[f, j, 0, 9] * py + m[f, j, 0, 10] * pz + m[f, j, 0, 11])
+        if m[f, j, 0, 12] * pw + m[f, j, 0, 13] * pxq + m[f, j, 0, 14] * pyq + m[f, j, 0, 15] * pzq < 0.0:
             w = -w
-        rw += w * m[f, j, 12]
-        rx += w * m[f, j, 13]
-        ry += w * m[f, j, 14]
-        rz += w * m[f, j, 15]
-        dw += w * m[f, j, 16]
-        dx += w * m[f, j, 17]
-        dy += w * m[f, j, 18]
-        dz += w * m[f, j, 19]
+        rw += w * m[f, j, 0, 12]
+        rx += w * m[f, j, 0, 13]
+        ry += w * m[f, j, 0, 14]
+        rz += w * m[f, j, 0, 15]
+        dw += w * m[f, j, 0, 16]
+        dx += w * m[f, j, 0, 17]
+        dy += w * m[f, j, 0, 18]
+        dz += w * m[f, j, 0, 19]
     if not scaled:  # G p (the geomBindTransform, slots 32..43)
-        sx = m[f, 0, 32] * px + m[f, 0, 33] * py + m[f, 0, 34] * pz + m[f, 0, 35]
-        sy = m[f, 0, 36] * px + m[f, 0, 37] * py + m[f, 0, 38] * pz + m[f, 0, 39]
-        sz = m[f, 0, 40] * px + m[f, 0, 41] * py + m[f, 0, 42] * pz + m[f, 0, 43]
+        sx = m[f, 0, 0, 32] * px + m[f, 0, 0, 33] * py + m[f, 0, 0, 34] * pz + m[f, 0, 0, 35]
+        sy = m[f, 0, 0, 36] * px + m[f, 0, 0, 37] * py + m[f, 0, 0, 38] * pz + m[f, 0, 0, 39]
+        sz = m[f, 0, 0, 40] * px + m[f, 0, 0, 41] * py + m[f, 0, 0, 42] * pz + m[f, 0, 0, 43]
     n = math.sqrt(rw * rw + rx * rx + ry * ry + rz * rz)
     if n < 1e-10:  # GfDualQuat::Normalize: the identity
         yx, yy, yz = sx, sy, sz
@@ -164,19 +166,26 @@ def _dqs(v, f, points, ji, jw, m):
         yy = sy + 2.0 * (rw * cy + (rz * cx - rx * cz)) + ty
         yz = sz + 2.0 * (rw * cz + (rx * cy - ry * cx)) + tz
     # the post transform (slots 20..31)
-    return (m[f, 0, 20] * yx + m[f, 0, 21] * yy + m[f, 0, 22] * yz + m[f, 0, 23],
-            m[f, 0, 24] * yx + m[f, 0, 25] * yy + m[f, 0, 26] * yz + m[f, 0, 27],
-            m[f, 0, 28] * yx + m[f, 0, 29] * yy + m[f, 0, 30] * yz + m[f, 0, 31])
+    return (m[f, 0, 0, 20] * yx + m[f, 0, 0, 21] * yy + m[f, 0, 0, 22] * yz + m[f, 0, 0, 23],
+            m[f, 0, 0, 24] * yx + m[f, 0, 0, 25] * yy + m[f, 0, 0, 26] * yz + m[f, 0, 0, 27],
+            m[f, 0, 0, 28] * yx + m[f, 0, 0, 29] * yy + m[f, 0, 0, 30] * yz + m[f, 0, 0, 31])
 
 
-@njit(cache=True, fastmath=FASTMATH_PROOF, inline="always")
 def _skin_vertex(v, f, points, ji, jw, m):
-    """The method switch of every loop below: the layout of the folded transforms says the
-    method (``(F, J, 12)``: linear blend, :func:`_lbs`; ``(F, J, DQ_WIDTH)``: dual quaternion,
-    :func:`_dqs`)."""
-    if m.shape[2] == 12:
-        return _lbs(v, f, points, ji, jw, m)
-    return _dqs(v, f, points, ji, jw, m)
+    """The method switch of every loop below (resolved when numba types the loop, below)."""
+    raise NotImplementedError("compiled only")
+
+
+@overload(_skin_vertex, inline="always")
+def _skin_vertex_typed(v, f, points, ji, jw, m):
+    """The layout of the folded transforms says the method, at typing time: ``(F, J, 12)``
+    linear blend (:func:`_lbs`), ``(F, J, 1, DQ_WIDTH)`` dual quaternion (:func:`_dqs`).  Each
+    loop is compiled for the method it is called with only (a runtime branch compiled both into
+    every loop and more than doubled their compile time), and inlined into it with the loop's
+    fast-math policy."""
+    if m.ndim == 3:
+        return lambda v, f, points, ji, jw, m: _lbs(v, f, points, ji, jw, m)
+    return lambda v, f, points, ji, jw, m: _dqs(v, f, points, ji, jw, m)
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH_PROOF)
@@ -351,7 +360,8 @@ def part_farthest(points, joint_indices, joint_weights, skin_xforms, part_offset
 CLASSIC_LINEAR = "classicLinear"
 DUAL_QUATERNION = "dualQuaternion"
 METHODS = (CLASSIC_LINEAR, DUAL_QUATERNION)
-#: Width of the dual-quaternion layout (:func:`fold_dq`): per (pose, joint) ``[0:12]`` the
+#: Width of the dual-quaternion layout (:func:`fold_dq`, ``(F, J, 1, DQ_WIDTH)``: one more axis
+#: than the linear ``(F, J, 12)``, so the kernels tell them apart by type): per (pose, joint) ``[0:12]`` the
 #: joint's scale/shear ``S_j`` times the geomBindTransform ``G`` (3x4, row by row), ``[12:16]``
 #: the real part ``(w, x, y, z)``, ``[16:20]`` the dual part, ``[20:32]`` the post transform
 #: (3x4), ``[32:44]`` ``G`` (3x4), ``[44]`` 1.0 when any joint of the pose has a scale.
@@ -431,7 +441,7 @@ def dq_parts(skin):
 
 
 def fold_dq(skin, geom_bind=None, world=None) -> np.ndarray:
-    """The dual-quaternion layout ``(F, J, DQ_WIDTH)`` (see :data:`DQ_WIDTH`) of skinning
+    """The dual-quaternion layout ``(F, J, 1, DQ_WIDTH)`` (see :data:`DQ_WIDTH`) of skinning
     transforms ``skin`` (F, J, 4, 4) or (J, 4, 4) = ``skel @ inv_bind`` (skeleton space),
     ``geom_bind`` (4, 4) applied to the points first and ``world`` (4, 4) or (F, 4, 4) applied
     to the skinned point last (UsdSkel skins in skeleton space)."""
@@ -440,14 +450,14 @@ def fold_dq(skin, geom_bind=None, world=None) -> np.ndarray:
     G = np.eye(4) if geom_bind is None else np.asarray(geom_bind, dtype=np.float64)
     W = np.eye(4) if world is None else np.asarray(world, dtype=np.float64)
     W = np.broadcast_to(W, (F, 4, 4)) if W.ndim == 2 else W.reshape(F, 4, 4)
-    out = np.empty((F, J, DQ_WIDTH))
+    out = np.empty((F, J, 1, DQ_WIDTH))
     SG = S @ G[:3, :]  # (F, J, 3, 4)
-    out[..., 0:12] = SG.reshape(F, J, 12)
-    out[..., 12:16] = real
-    out[..., 16:20] = dual
-    out[..., 20:32] = W[:, None, :3, :].reshape(F, 1, 12)
-    out[..., 32:44] = G[:3, :].reshape(12)
-    out[..., 44] = scaled.astype(np.float64)[:, None]
+    out[..., 0, 0:12] = SG.reshape(F, J, 12)
+    out[..., 0, 12:16] = real
+    out[..., 0, 16:20] = dual
+    out[..., 0, 20:32] = W[:, None, :3, :].reshape(F, 1, 12)
+    out[..., 0, 32:44] = G[:3, :].reshape(12)
+    out[..., 0, 44] = scaled.astype(np.float64)[:, None]
     return out
 
 
@@ -476,6 +486,6 @@ def _skin(pts, ji, jw, m, out):
 
 def _folded(x):
     a = np.asarray(x, dtype=np.float64)
-    if a.ndim == 3 and a.shape[-1] in (12, DQ_WIDTH):
+    if (a.ndim == 3 and a.shape[-1] == 12) or (a.ndim == 4 and a.shape[-2:] == (1, DQ_WIDTH)):
         return np.ascontiguousarray(a)
     return fold(a)
