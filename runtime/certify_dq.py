@@ -145,33 +145,39 @@ def _path_speeds(rig, fac, pj_point):
 
 class _Times:
     """Skeleton transforms, exact part distances and joint quaternions at any time of the clip,
-    computed on demand (and kept)."""
+    computed on demand (only for the parts asked) and kept."""
 
     def __init__(self, rig, clip, times, fac):
         self.rig = rig
         self.mats = C._Mats(rig, clip, times, fac)
-        self.dist = {}   # t -> (P,) skeleton-space farthest |x - C|
+        self.dist = {}   # (t, part) -> skeleton-space farthest |x - C|
         self.quat = {}   # t -> (J, 4) UsdSkel's joint quaternions (w, x, y, z)
 
     def skel_at(self, t):
         return self.mats.skel_at(t)
 
-    def fill(self, ts):
+    def fill(self, requests):
+        """Skin what ``requests`` ((time, part) pairs) needs and is not known yet."""
         rig = self.rig
-        ts = sorted({float(t) for t in ts if float(t) not in self.dist})
-        if not ts:
+        need = sorted({(float(t), int(p)) for t, p in requests if (float(t), int(p)) not in self.dist})
+        if not need:
             return
+        ts = sorted({t for t, _ in need})
+        row = {t: n for n, t in enumerate(ts)}
+        todo = np.zeros((len(ts), rig.P), bool)
+        for t, p in need:
+            todo[row[t], p] = True
         skel = np.stack([self.skel_at(t) for t in ts])  # (T, J, 4, 4)
         skin = skel @ rig.inv_bind
         real, _, _, _ = SK.dq_parts(skin)
-        J = rig.part_joint
-        KJ = skel[:, J]
+        KJ = skel[:, rig.part_joint]
         cen = np.einsum("tpij,pj->tpi", KJ[..., :3, :3], rig.part_centers) + KJ[..., :3, 3]
         d, _ = SK.part_farthest(rig.points, rig.joint_indices, rig.joint_weights,
-                                SK.fold_dq(skin, rig.geom_bind), rig.vert_offsets, rig.verts, cen)
+                                SK.fold_dq(skin, rig.geom_bind), rig.vert_offsets, rig.verts, cen, todo=todo)
+        for t, p in need:
+            self.dist[(t, p)] = d[row[t], p]
         for n, t in enumerate(ts):
-            self.dist[t] = d[n]
-            self.quat[t] = real[n]
+            self.quat.setdefault(t, real[n])
 
 
 def certificate(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel: float, **kw) -> C.Continuous:
@@ -311,7 +317,7 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
     worst, deepest, found = {}, {}, {}
     bad_hyp = set()
     while nodes:
-        tm.fill([x for n in nodes for x in (n[2], n[3])])
+        tm.fill([(x, n[1]) for n in nodes for x in (n[2], n[3])])
         nxt = []
         for i, p, a, b, depth in nodes:
             key = (i, p)
@@ -330,7 +336,7 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
                 no_flip = bool(np.all(da + db > 0.5 * l * (omega[i, jA] + omega[i, jP]) * (1 + ROUND)))
             else:
                 no_flip = True
-            Ga, Gb = tm.dist[a][p], tm.dist[b][p]
+            Ga, Gb = tm.dist[(a, p)], tm.dist[(b, p)]
             U = ((Ga + Gb) / 2 + Lp[i, p] * l / 2 + 2 * Ep[i, p]) * (1 + ROUND) / (lK[i, Jp[p]] * (1 - 1e-12))
             if no_flip and U <= rho[i, p]:
                 worst[key] = max(worst.get(key, -np.inf), U)
