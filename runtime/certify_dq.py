@@ -84,8 +84,15 @@ from __future__ import annotations
 import numpy as np
 
 from . import certify as C
+from .kernels import bounds as B
 from .kernels import interval as IV
+from .kernels import pose as PK
 from .kernels import skin as SK
+
+#: Subdivision depth before an interval is left undecided (as the linear certificate's).
+MAX_DEPTH = 8
+#: A failing interval is sampled at this many sub-steps for its worst excess.
+FAIL_SAMPLES = 16
 
 #: Largest ``||S_j - I||`` (stretch of a skinning transform) the Lipschitz bound accepts.
 ETA_MAX = 1e-3
@@ -148,13 +155,21 @@ class _Times:
     computed on demand (only for the parts asked) and kept."""
 
     def __init__(self, rig, clip, times, fac):
-        self.rig = rig
-        self.mats = C._Mats(rig, clip, times, fac)
+        self.rig, self.clip = rig, clip
+        self.frame = {float(t): i for i, t in enumerate(times)}
+        self.locals = fac["locals"]
+        self.skel = {}
         self.dist = {}   # (t, part) -> skeleton-space farthest |x - C|
         self.quat = {}   # t -> (J, 4) UsdSkel's joint quaternions (w, x, y, z)
 
     def skel_at(self, t):
-        return self.mats.skel_at(t)
+        """(J, 4, 4) skeleton-space joint transforms at time ``t`` (UsdSkel's interpolation)."""
+        t = float(t)
+        if t not in self.skel:
+            i = self.frame.get(t)
+            local = self.locals[i] if i is not None else PK.locals_at(self.clip, [t], self.rig.rest_local)[0]
+            self.skel[t] = PK.compose(local, self.rig.parents, self.rig.topo)
+        return self.skel[t]
 
     def fill(self, requests):
         """Skin what ``requests`` ((time, part) pairs) needs and is not known yet."""
@@ -192,7 +207,7 @@ def certificate(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel
 
 
 def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel: float, rho=None,
-               growth: bool = False, max_depth: int = C.MAX_DEPTH, frame_bound_space: str = "stage") -> C.Continuous:
+               growth: bool = False, max_depth: int = MAX_DEPTH, frame_bound_space: str = "stage") -> C.Continuous:
     """:func:`runtime.certify.continuous` for a dual-quaternion rig (the bound: module docstring).
 
     Same parameters and result; ``frame_bound`` is not used (the ends of every sub-interval are
@@ -212,14 +227,14 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
 
     # -- the radius held (as runtime.certify.continuous): scale bounds of N_J = world @ K_J
     with np.errstate(all="ignore"):
-        s_hi = nK * C._norm2(rig.world[:3, :3])
-        s_lo = lK * C._sigma_min(rig.world[:3, :3])
+        sw = np.linalg.svd(rig.world[:3, :3], compute_uv=False)
+        s_hi = nK * sw[0] * (1 + 1e-12)
+        s_lo = lK * sw[-1] * (1 - 1e-12)
         iso = fac["iso"].copy()
         for j in rig.topo:
             p = rig.parents[j]
             if p >= 0:
                 iso[:, j] &= iso[:, p]
-        sw = np.linalg.svd(rig.world[:3, :3], compute_uv=False)
         iso &= bool(sw[0] - sw[-1] <= 1e-12 * sw[0])
         ratio = np.where(iso, 1.0, s_lo / s_hi)
         r = rig.part_radii
@@ -344,7 +359,7 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
                 continue
             if not growth and depth > 0 and max(Ga, Gb) / lK[i, Jp[p]] > rho[i, p]:
                 t_end = a if Ga >= Gb else b
-                d, R, v = C.sampled_exact(rig, tm.skel_at(t_end)[None], [p])
+                d, R, v = _exact(rig, tm.skel_at(t_end)[None], p)
                 if d[0] - R[0] * (1 + tol_rel) - tol_abs > 0:
                     out.status[i, p] = 3
                     found[key] = (t_end, int(v[0]), float(d[0] - R[0]), float(R[0]))
@@ -369,9 +384,34 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
             out.status[i, p] = 1 if deepest.get(key, 0) == 0 else 2
         out.bound[i, p] = worst.get(key, np.inf) if out.status[i, p] != 3 else np.inf
     for i, p in np.argwhere((out.status == 3) | (out.status == 4)):
-        f = C._describe_failure(rig, clip, times, int(i), int(p), out, tm, found.get((int(i), int(p))))
+        f = _describe_failure(rig, times, int(i), int(p), out, tm, found.get((int(i), int(p))))
         if (int(i), int(p)) in bad_hyp:
             f["reason"] = ("the dual-quaternion bound's hypotheses fail on this interval (animated scales, a "
                            "stretched or mirrored skinning transform, or negative weights): not certified")
         out.failures.append(f)
     return out
+
+
+def _exact(rig, skel, p):
+    """Stage-space farthest distance, radius and vertex of part ``p`` at poses ``skel`` (F, J, 4, 4)."""
+    sph, _, _ = B.pose_bounds(rig.world @ skel, rig.bounds)
+    todo = np.zeros(sph.shape[:2], bool)
+    todo[:, p] = True
+    d, v = SK.part_farthest(rig.points, rig.joint_indices, rig.joint_weights,
+                            SK.fold_dq(skel @ rig.inv_bind, rig.geom_bind, rig.world), rig.vert_offsets, rig.verts,
+                            sph[..., :3], todo=todo)
+    return d[:, p], sph[:, p, 3], v[:, p]
+
+
+def _describe_failure(rig, times, i, p, out, tm, found):
+    """The worst excess of part ``p`` over interval ``i``: the time the subdivision found outside
+    and :data:`FAIL_SAMPLES` evenly spaced sub-steps, all skinned exactly in stage space."""
+    t0, t1 = float(times[i]), float(times[i + 1])
+    sub = t0 + (t1 - t0) * np.arange(1, FAIL_SAMPLES) / FAIL_SAMPLES
+    d, R, v = _exact(rig, np.stack([tm.skel_at(t) for t in sub]), p)
+    k = int(np.argmax(d - R))
+    time, vertex, excess, radius = float(sub[k]), int(v[k]), float(d[k] - R[k]), float(R[k])
+    if found is not None and found[2] > excess:
+        time, vertex, excess, radius = found
+    return {"interval": i, "part": p, "t0": t0, "t1": t1, "time": time, "vertex": vertex, "excess": excess,
+            "radius": radius, "definite": bool(out.status[i, p] == 3), "bound": float(out.bound[i, p])}
