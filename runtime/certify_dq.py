@@ -27,12 +27,12 @@ the root path: ``||A_j|| <= N_j = nK_j ||B_j^-1||``, ``sigma_min(A_j) >= m_j = l
 sigma_min(B_j^-1)`` and ``||A_j'|| <= dK_j ||B_j^-1||`` with ``nK_j = nK_par n0_j``, ``lK_j =
 lK_par / n0inv_j``, ``dK_j = dK_par n0_j + nK_par n1_j``.  Then
 
-1. ``eta_j = max(N_j - 1, 1 - m_j) + 1e-5`` bounds ``||S_j - I||`` (the eigenvalues of ``S_j``
-   are ``A_j``'s singular values where ``det A_j > 0``, checked at every sample: it cannot change
-   sign in between while ``m_j > 0``; ``1e-5``, and a factor ``1 + 1e-5`` on every local
-   factor's ``n0``, ``n1`` and ``1 / n0inv``, cover rotation matrices made from float32
-   quaternions that are not exactly unit, GfSlerp's linear branch included: ``1 - |q|^2 <=
-   5e-6`` there).
+1. ``eta_j = max(N_j - 1, 1 - m_j)`` bounds ``||S_j - I||`` (the eigenvalues of ``S_j`` are
+   ``A_j``'s singular values where ``det A_j > 0``, checked at every sample: it cannot change
+   sign in between while ``m_j > 0``).  Every animated local factor's ``n0``, ``n1`` and
+   ``1 / n0inv`` are corrected by :func:`quat_pads`: UsdSkel's rotation matrix of a quaternion
+   that is not exactly unit (float32 storage, GfSlerp's unnormalised linear branch) is not
+   quite a rotation.
 2. ``omega_j = ||A_j'|| / sigma_min(A_j)`` bounds the angular speed of ``R_j``: with ``R^T R' =
    W`` skew, ``R^T A' - A'^T R = W S + S W``; in ``S``'s eigenbasis ``W_ik (s_i + s_k) = K_ik``,
    and ``|w|^2 = sum_{i<k} W_ik^2 <= sum K_ik^2 / (2 s_min)^2 = ||K||_2^2 / (2 s_min)^2 <=
@@ -54,9 +54,11 @@ lK_par / n0inv_j``, ``dK_j = dK_par n0_j + nK_par n1_j``.  Then
 6. Constants: ``|x - x°| = |s - p| <= (sum w_j eta_j + |sum w_j - 1|) |p|`` (0 without a scale
    flag) and ``|T(b, c_e)| <= 2 |c_e| / |b| <= sum w_j eta_j |o| / w_max``; their sum is
    ``eps_v``.
-7. Lipschitz: ``h(u) = R(b^)(p - o) + T(b, c_D)`` has ``|h'| <= L_v = Omega |p - o| + 2 |c_D'| /
-   w_max + 6 |c_D| |b'| / w_max^2`` with ``|b'| <= sum w_j omega_j / 2``, ``Omega = 2 |b'| /
-   w_max`` (the angular speed of ``R(b^)``: ``|(b/|b|)'| <= |b'| / |b|``), ``|c_D| <= sum w_j
+7. Lipschitz, in the blend's own frame: ``h(u) = R(b^)(p - o) + T(b, c_D)`` has ``|h| = |k|``
+   with ``k(u) = R(b^)^T h = (p - o) + 2 Im(b* c_D) / |b|^2`` (``R(b^)^T 2 Im(c b*) / |b|^2 =
+   2 Im(b* c) / |b|^2``: conjugating by the unit ``b^`` moves the vector part and keeps the real
+   one), whose first term is constant: ``|k'| <= L_v = 2 |c_D'| / w_max + 6 |c_D| |b'| / w_max^2``
+   (the quotient rule, ``|b| >= w_max``), with ``|b'| <= sum w_j omega_j / 2``, ``|c_D| <= sum w_j
    Dm_j / 2``, ``|c_D'| <= sum w_j (Dv_j + Dm_j omega_j / 2) / 2`` (``d_j = (0, D_j/2) q_j``), and
    ``|D_j| <= Dm_j = nK_J E_j``, ``|D_j'| <= Dv_j = dK_J E_j + nK_J V_j``.  ``E_j`` bounds
    ``|Y_j(o) - c_P|`` on the interval (the end distances plus the chord deviation of
@@ -65,8 +67,9 @@ lK_par / n0inv_j``, ``dK_j = dK_par n0_j + nK_par n1_j``.  Then
    (innermost first) a point ``z`` moved by a forward factor ``F z + t`` gains ``|(Fz + t)'| <=
    n0 |z'| + n1 |z|max + dt`` and by an inverse one ``|(F^-1 (z - t))'| <= n0inv |z'| + n1inv
    (|z|max + |t|max) + n0inv dt``.
-8. Hence on ``[a, b]``, for every vertex, ``|x(u) - C(u)| <= |h(u)| + eps_v <= (|h(a)| + |h(b)|)
-   / 2 + L_v l / 2 + eps_v <= (g(a) + g(b)) / 2 + L_v l / 2 + 2 eps_v`` with ``g = |x - C|``
+8. Hence on ``[a, b]``, for every vertex (``|k|`` is ``L_v``-Lipschitz), ``|x(u) - C(u)| <= |h(u)|
+   + eps_v <= (|h(a)| + |h(b)|) / 2 + L_v l / 2 + eps_v <= (g(a) + g(b)) / 2 + L_v l / 2 + 2 eps_v``
+   with ``g = |x - C|``
    skinned exactly at the ends (the runtime's kernel); per part, ``U = (G(a) + G(b)) / 2 +
    max_v (L_v l / 2 + 2 eps_v)`` with ``G`` the part's exact farthest distance.  In ``J``'s space
    ``|y - c_P| <= |x - C| / sigma_min(K_J) <= U / lK_J``, held to the same radius ``rho`` as the
@@ -96,41 +99,90 @@ FAIL_SAMPLES = 16
 
 #: Largest ``||S_j - I||`` (stretch of a skinning transform) the Lipschitz bound accepts.
 ETA_MAX = 1e-3
-#: Slack of eta for rotation matrices from float32 (and GfSlerp-lerped) quaternions.
-ETA_PAD = 1e-5
 #: Relative padding of every bound (float64 rounding).
 ROUND = 1e-9
 
 
-def _joint_bounds(rig, fac):
+def quat_pads(clip, times, rest_local, J):
+    """(up, down, dadd): (I, J) arrays correcting each local factor's bounds for UsdSkel's
+    rotation matrix of a quaternion that is not exactly unit (item 1).
+
+    UsdSkel builds the matrix of ``q = lam q^`` with the unit-quaternion formula, which gives
+    ``M = (1 - lam^2) I + lam^2 R`` (``R`` the rotation of ``q^``, angle ``th``): along the axis
+    ``M`` is 1, in the plane it is ``(1 - lam^2) + lam^2 e^{i th}`` of modulus ``sqrt(1 - 2 lam^2
+    (1 - lam^2)(1 - cos th))``; so its singular values lie in ``[1 - 2 e- (1 - cos th), 1 + 2 e+
+    (1 - cos th)]`` with ``e+- >= max(0, +-(lam^2 - 1))`` (``up``, ``down``), and ``||M'|| <=
+    ||R'|| (1 + e+) + 2 |(lam^2)'|`` (``dadd``, times the factor's largest scale).  Over an
+    interval: ``|1 - lam^2| <= 2 dev + lin + 1e-7`` with ``dev`` the end samples' own
+    ``|1 - |q|^2|`` (float32 storage; GfSlerp's weights sum to at most sqrt 2) and ``lin = (1 -
+    cos) / 2`` on GfSlerp's linear branch (``1 - cos <= 1e-5``: ``|q|^2 = 1 - 2u(1-u)(1 - cos)``,
+    so ``|(lam^2)'| <= 2 (1 - cos)`` there, and ``<= 8 dev`` on the slerp branch); ``th`` at most
+    the smaller end's angle plus the interval's (``1 - cos th <= 2``).  Joints the clip does not
+    animate: their rest matrices, exact (1, 1, 0)."""
+    from .kernels import pose as _pk
+    _, _, q, sc = _pk.locals_at(clip, times, rest_local, trs=True)  # (T, A, 4) (x, y, z, w)
+    I = len(times) - 1
+    up, down, dadd = np.ones((I, J)), np.ones((I, J)), np.zeros((I, J))
+    if q.shape[1] == 0 or I < 1:
+        return up, down, dadd
+    f32 = q.astype(np.float32)
+    cos = np.minimum(np.abs((f32[:-1] * f32[1:]).sum(-1, dtype=np.float32)).astype(np.float64), 1.0)
+    n2 = (q * q).sum(-1)
+    lin = 1.0 - cos <= 1e-5
+    e_up = 2.0 * np.maximum(np.maximum(n2[:-1] - 1.0, n2[1:] - 1.0), 0.0) + 1e-7
+    e_dn = 2.0 * np.maximum(np.maximum(1.0 - n2[:-1], 1.0 - n2[1:]), 0.0) + np.where(lin, (1.0 - cos) / 2.0, 0.0) + 1e-7
+    ang = 2.0 * np.arccos(np.minimum(np.abs(q[..., 3]) / np.sqrt(n2), 1.0))  # each sample's rotation angle
+    th = np.minimum(np.minimum(ang[:-1], ang[1:]) + 2.0 * np.arccos(cos) * 1.001 + 1e-6, np.pi)
+    omc = 1.0 - np.cos(th)
+    smax = np.maximum(np.abs(sc[:-1]).max(-1), np.abs(sc[1:]).max(-1))
+    dev = np.maximum(np.abs(1.0 - n2[:-1]), np.abs(1.0 - n2[1:]))
+    a = clip.anim_to_skel
+    up[:, a] = 1.0 + 2.0 * e_up * omc
+    down[:, a] = np.maximum(1.0 - 2.0 * e_dn * omc, 0.0)
+    dadd[:, a] = 2.0 * np.where(lin, 2.0 * (1.0 - cos), 8.0 * dev + 1e-7) * smax
+    return up, down, dadd
+
+
+def _joint_bounds(rig, fac, pads):
     """Per (interval, joint): nK, lK, dK (skeleton-space linear part norm, smallest singular
-    value, derivative norm) and, for the skinning transform, eta, omega (items 1-2)."""
+    value, derivative norm) and, for the skinning transform, eta, omega (items 1-2); ``pads``
+    from :func:`quat_pads`."""
     fw, iv = fac["fw"], fac["iv"]
+    up, down, dadd = pads
     I, Jn = fw.shape[:2]
     nK, lK, dK = np.empty((I, Jn)), np.empty((I, Jn)), np.empty((I, Jn))
-    pad = 1.0 + ETA_PAD  # per factor: rotation matrices of float32 (or GfSlerp-lerped) quaternions
     with np.errstate(all="ignore"):
         for j in rig.topo:
             p = rig.parents[j]
+            n0 = fw[:, j, 0] * up[:, j]
+            l0 = down[:, j] / iv[:, j, 0]
+            n1 = fw[:, j, 1] * up[:, j] + dadd[:, j]
             if p < 0:
-                nK[:, j], lK[:, j], dK[:, j] = fw[:, j, 0] * pad, 1.0 / (iv[:, j, 0] * pad), fw[:, j, 1] * pad
+                nK[:, j], lK[:, j], dK[:, j] = n0, l0, n1
             else:
-                nK[:, j] = nK[:, p] * fw[:, j, 0] * pad
-                lK[:, j] = lK[:, p] / (iv[:, j, 0] * pad)
-                dK[:, j] = (dK[:, p] * fw[:, j, 0] + nK[:, p] * fw[:, j, 1]) * pad
+                nK[:, j] = nK[:, p] * n0
+                lK[:, j] = lK[:, p] * l0
+                dK[:, j] = dK[:, p] * n0 + nK[:, p] * n1
         sv = np.linalg.svd(rig.inv_bind[:, :3, :3], compute_uv=False)
         Bn, Bs = sv[:, 0] * (1 + 1e-12), sv[:, -1] * (1 - 1e-12)
         N, m = nK * Bn, lK * Bs
-        eta = np.maximum(N - 1.0, 1.0 - m) + ETA_PAD
+        eta = np.maximum(N - 1.0, 1.0 - m) * (1 + ROUND) + 1e-12
         omega = dK * Bn / m * (1 + ROUND)
     return nK, lK, dK, eta, omega
 
 
-def _path_speeds(rig, fac, pj_point):
+def _path_speeds(rig, fac, pj_point, pads):
     """(I, M) speed bound ``V`` of ``Y_b(z0)`` for every (part, joint) pair (item 7), ``z0 =
-    pj_point`` in the joint's own space."""
+    pj_point`` in the joint's own space; the factors' bounds corrected by ``pads``
+    (:func:`quat_pads`; an inverse factor's derivative by ``||(M^-1)'|| <= ||M^-1||^2 ||M'||``)."""
     off, pj, pd, _ = rig.paths()
-    fw, iv, dt = fac["fw"], fac["iv"], fac["dt"]
+    up, down, dadd = pads
+    fw, iv, dt = fac["fw"].copy(), fac["iv"].copy(), fac["dt"]
+    with np.errstate(all="ignore"):
+        fw[..., 0] *= up
+        fw[..., 1] = fw[..., 1] * up + dadd
+        iv[..., 0] /= down
+        iv[..., 1] = np.maximum(iv[..., 1] / down ** 2, iv[..., 0] ** 2 * fw[..., 1])
     tmax = np.maximum(np.linalg.norm(fac["L0"][..., :3, 3], axis=-1), np.linalg.norm(fac["L1"][..., :3, 3], axis=-1))
     I, M = fw.shape[0], len(off) - 1
     V = np.zeros((I, M))
@@ -222,7 +274,8 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
         return C.Continuous(z.astype(np.int8), z, z)
     bd = rig.bounds
     fac = C.factor_bounds(clip, times, rig.rest_local)
-    nK, lK, dK, eta, omega = _joint_bounds(rig, fac)
+    pads = quat_pads(clip, times, rig.rest_local, len(rig.bind))
+    nK, lK, dK, eta, omega = _joint_bounds(rig, fac, pads)
     Jp = rig.part_joint
 
     # -- the radius held (as runtime.certify.continuous): scale bounds of N_J = world @ K_J
@@ -273,7 +326,7 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
                         off, pj, pd, np.ascontiguousarray(z0), np.zeros(M), pair_part, bd.part_centers,
                         e0, e1, delta, lam, pert)
     E = (np.maximum(e0, e1) + delta + pert) * (1 + ROUND)
-    V = _path_speeds(rig, fac, z0) if M else np.zeros((I, 0))
+    V = _path_speeds(rig, fac, z0, pads) if M else np.zeros((I, 0))
     Dm = nK[:, Jp[pair_part]] * E
     Dv = dK[:, Jp[pair_part]] * E + nK[:, Jp[pair_part]] * V
 
@@ -304,13 +357,11 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
             et = np.where(live[None], eta[:, jj], 0.0)
             sw_ = (w[None] * et).sum(2)
             bdot = 0.5 * (w[None] * om).sum(2)
-            Om = 2.0 * bdot / wmax[None]
             dm = np.where(live[None], Dm[:, k], 0.0)
             dv = np.where(live[None], Dv[:, k], 0.0)
             cD = 0.5 * (w[None] * dm).sum(2)
             cDd = 0.5 * (w[None] * (dv + dm * om / 2)).sum(2)
-            dpo = np.linalg.norm(pbind[vs] - o_bind[p], axis=1)
-            L = Om * dpo[None] + 2.0 * cDd / wmax[None] + 6.0 * cD * bdot / wmax[None] ** 2
+            L = 2.0 * cDd / wmax[None] + 6.0 * cD * bdot / wmax[None] ** 2
             eps_v = (sw_ + np.abs(jw[vs].sum(1) - 1.0)[None]) * np.linalg.norm(pbind[vs], axis=1)[None] \
                 + sw_ * np.linalg.norm(o_bind[p]) / wmax[None]
             Lp[:, p] = np.max(L, axis=1) * (1 + ROUND)
