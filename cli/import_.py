@@ -91,7 +91,7 @@ def _stage_line(rep) -> str:
                 f"closed, deviation <= {_num(c['deviation'], '.4g')} ({_num(None if c['deviation_relative'] is None else 100 * c['deviation_relative'], '.3g')}% of size)")
     if s == "write":
         checked = f"; error rules passed in {c['check_seconds']:.3f} s" if "check_seconds" in c else ""
-        return f"{c['path']} ({c['bytes']} bytes{checked})"
+        return f"{c['path']} ({c['bytes']} bytes, {c.get('skinning_method', 'classicLinear')} skinning{checked})"
     return ""
 
 

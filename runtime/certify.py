@@ -81,6 +81,9 @@ class Rig:
     verts: np.ndarray
     world: np.ndarray = field(default_factory=lambda: np.eye(4))
     bounds: B.BoundData | None = None
+    #: "classicLinear" or "dualQuaternion" (the mesh's ``primvars:skel:skinningMethod``): a
+    #: dual-quaternion rig is certified by :mod:`runtime.certify_dq` (exact skinning at samples)
+    skinning_method: str = SK.CLASSIC_LINEAR
 
     def __post_init__(self):
         J = len(self.bind)
@@ -119,7 +122,10 @@ class Rig:
         return len(self.part_joint)
 
     def skin_mats(self, skel) -> np.ndarray:
-        """(F, J, 12) folded stage-space skinning transforms ``world @ skel @ inv_bind @ geom_bind``."""
+        """(F, J, 12) folded stage-space skinning transforms ``world @ skel @ inv_bind @ geom_bind``
+        (a dual-quaternion rig: the (F, J, 1, DQ_WIDTH) layout of :func:`runtime.kernels.skin.fold_dq`)."""
+        if self.skinning_method != SK.CLASSIC_LINEAR:
+            return SK.fold_method(self.skinning_method, skel @ self.inv_bind, self.geom_bind, self.world)
         return SK.fold(self.world @ skel @ self.inv_bind @ self.geom_bind)
 
     def joint_space_mats(self, skel, joint) -> np.ndarray:
@@ -187,8 +193,11 @@ def sampled(rig: Rig, skel, tol_abs: float, tol_rel: float, exact=None) -> Sampl
     R = sph[..., 3]
     limit = R * (1.0 + tol_rel) + tol_abs
     tier = np.full(R.shape, 2, dtype=np.int8)
-    tier[kb <= limit] = 0
-    tier[(tier == 2) & (db <= limit)] = 1
+    if rig.skinning_method == SK.CLASSIC_LINEAR:  # tests K and D bound linear blends only
+        tier[kb <= limit] = 0
+        tier[(tier == 2) & (db <= limit)] = 1
+    else:  # dual quaternion: every part skinned exactly (runtime.certify_dq)
+        kb = db = np.full(R.shape, np.inf)
     todo = tier == 2
     if exact is not None:
         todo = todo | exact
@@ -319,6 +328,8 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     rho : (P,) or (I, P), optional: radii to hold the bounds to, times the interval's scale ratio as
         for the spheres' own radii (default: the spheres' radii with the tolerance)
     """
+    if rig.skinning_method != SK.CLASSIC_LINEAR:  # the chord bounds are LBS's: runtime.certify_dq.certificate
+        raise ValueError(f"continuous: a {rig.skinning_method!r} rig is certified by runtime.certify_dq")
     times = np.asarray(times, dtype=np.float64)
     F, P = len(times), rig.P
     I = F - 1

@@ -60,6 +60,22 @@ PROXY_WORST_FRAME = "colossus:proxy:worstFrame"
 PROXY_WORST_BONE = "colossus:proxy:worstBone"
 PROXY_WORST_DIRECTION = "colossus:proxy:worstDirection"
 
+#: The collision mesh's skinning method (UsdSkel's ``primvars:skel:skinningMethod``, a uniform
+#: token; absent means ``classicLinear``) and the methods the runtime poses
+#: (:mod:`runtime.kernels.skin`).
+SKINNING_METHOD_ATTR = "primvars:skel:skinningMethod"
+SKINNING_METHODS = ("classicLinear", "dualQuaternion")
+
+
+def skinning_method(prim) -> str:
+    """The authored ``primvars:skel:skinningMethod`` of ``prim`` as a str (``"classicLinear"``
+    when not authored, UsdSkel's fallback); any other token is returned as is for the caller to
+    refuse (the runtime) or report (the validator)."""
+    attr = prim.GetAttribute(SKINNING_METHOD_ATTR)
+    v = attr.Get() if attr and attr.HasAuthoredValue() else None
+    return SKINNING_METHODS[0] if v is None else str(v)
+
+
 #: Prim names under the SkelRoot.
 SKELETON_NAME = "Skeleton"
 COLLIDER_NAME = "Collider"

@@ -182,13 +182,14 @@ def _posed_size(mesh: SkinnedMesh, local: np.ndarray) -> float:
     joint-local transforms ``local`` (b, 4, 4): the model as a clip moves it (bind-space positions
     can be at another scale: lumberjack's mesh is authored in centimetres, bound by x100 binds,
     and moved in metres)."""
-    from colossus.runtime.kernels.skin import skin_frames
+    from colossus.runtime.kernels.skin import fold_method, skin_frames
 
     from ..model import skel_transforms
     from ..tolerances import model_scale
 
-    mats = skel_transforms(local, mesh.parents) @ np.linalg.inv(mesh.bind_transforms) @ mesh.geom_bind
-    return model_scale(skin_frames(mesh.positions, mesh.joint_indices, mesh.joint_weights, mats[None],
+    mats = fold_method(mesh.skinning_method, skel_transforms(local, mesh.parents) @ np.linalg.inv(mesh.bind_transforms),
+                       mesh.geom_bind)
+    return model_scale(skin_frames(mesh.positions, mesh.joint_indices, mesh.joint_weights, mats,
                                    dtype=np.float64)[0])
 
 

@@ -6,7 +6,8 @@ Layout (``<Name>`` is the source file's stem made a valid identifier)::
     /<Name>/Skeleton        Skeleton: joints, bindTransforms, restTransforms,
                             skel:animationSource -> the first clip
     /<Name>/Collider        Mesh: triangles, rightHanded, UsdSkelBindingAPI (jointIndices /
-                            jointWeights, elementSize = max influences), PhysicsCollisionAPI,
+                            jointWeights, elementSize = max influences; skinningMethod
+                            "dualQuaternion" where the source skins so), PhysicsCollisionAPI,
                             PhysicsMeshCollisionAPI (approximation "none"), colossus:parts:*,
                             customData["colossus"] = provenance
     /<Name>/<clip>          SkelAnimation per clip, one time sample per source frame
@@ -180,6 +181,8 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None, check=Non
         k = mesh.joint_indices.shape[1]
         binding.CreateJointIndicesPrimvar(False, k).Set(Vt.IntArray.FromNumpy(mesh.joint_indices.reshape(-1).astype(np.int32)))
         binding.CreateJointWeightsPrimvar(False, k).Set(Vt.FloatArray.FromNumpy(mesh.joint_weights.reshape(-1).astype(np.float32)))
+        if mesh.skinning_method != UsdSkel.Tokens.classicLinear:  # UsdSkel's default is linear
+            binding.CreateSkinningMethodAttr().Set(mesh.skinning_method)
         if not np.allclose(mesh.geom_bind, np.eye(4), rtol=0, atol=1e-12):
             binding.CreateGeomBindTransformAttr(schema.matrices_to_usd(mesh.geom_bind))
         UsdPhysics.CollisionAPI.Apply(geo.GetPrim())
@@ -213,7 +216,8 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None, check=Non
         _unlink(tmp)
         raise
     size = os.path.getsize(out)
-    counts = {"path": out, "bytes": size, "clips": len(mesh.clips), "joints": mesh.joint_count, "parts": len(parts)}
+    counts = {"path": out, "bytes": size, "clips": len(mesh.clips), "joints": mesh.joint_count, "parts": len(parts),
+              "skinning_method": mesh.skinning_method}
     if checked is not None:
         counts["check_seconds"] = checked
     return mesh, StageReport("write", counts=counts)

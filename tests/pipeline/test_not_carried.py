@@ -381,14 +381,33 @@ def test_gltf_live_morph_targets_are_bounded_inert_ones_are_not_items(tmp_path):
 
 
 # ------------------------------------------------------------------------------ USD
-def test_usd_dual_quaternion_skinning_is_bounded_by_usd_cores_own(tmp_path):
-    from pxr import Usd, UsdGeom, UsdSkel
+def _limb_dq(tmp_path, which=None):
+    """``samples/limb.usda`` with ``primvars:skel:skinningMethod = "dualQuaternion"`` on its meshes
+    (``which``: only on the meshes whose names it holds; the others stay linear)."""
+    from pxr import Sdf, Usd, UsdGeom, UsdSkel
     st = Usd.Stage.Open(str(SAMPLES / "limb.usda"))
+    if which is not None:  # a second, linear copy of the limb beside it: the meshes mix methods
+        layer = st.GetRootLayer()
+        assert Sdf.CopySpec(layer, "/root/LimbArmature/Limb", layer, "/root/LimbArmature/Limb2")
     for prim in st.Traverse():
-        if prim.IsA(UsdGeom.Mesh):
+        if prim.IsA(UsdGeom.Mesh) and (which is None or prim.GetParent().GetName() in which):
             UsdSkel.BindingAPI(prim).CreateSkinningMethodAttr().Set(UsdSkel.Tokens.dualQuaternion)
     p = tmp_path / "limb_dq.usda"
     st.Export(str(p))
+    return p
+
+
+def test_usd_dual_quaternion_skinning_is_carried(tmp_path):
+    from colossus.pipeline.readers import read
+    p = _limb_dq(tmp_path)
+    assert _items(p) == []
+    assert read(p).skinning_method == "dualQuaternion"
+
+
+def test_usd_mixed_skinning_methods_are_bounded_by_usd_cores_own(tmp_path):
+    """Meshes that mix methods: the collider carries one; the others are bounded by usd-core's
+    own dual-quaternion skinning against its linear skinning, and --strict refuses."""
+    p = _limb_dq(tmp_path, which={"Limb"})
     items = _items(p)
     assert [x["what"] for x in items] == ["usd_skinning_method"] and items[0]["bound_relative"] > 1e-4
     _one_line_refusal(p, tmp_path, "usd_skinning_method")
@@ -396,16 +415,10 @@ def test_usd_dual_quaternion_skinning_is_bounded_by_usd_cores_own(tmp_path):
 
 def test_numpy_dual_quaternions_agree_with_usd_core(tmp_path):
     """The FBX bound's dual-quaternion skinning (reader.bounds) is usd-core's: on the USD sample
-    made dual-quaternion, its largest gap to linear skinning at the frames equals usd-core's."""
-    from pxr import Usd, UsdGeom, UsdSkel
+    with mixed methods, its largest gap to linear skinning at the frames equals usd-core's."""
     from colossus.pipeline.readers import read
     from colossus.pipeline.readers import bounds
-    st = Usd.Stage.Open(str(SAMPLES / "limb.usda"))
-    for prim in st.Traverse():
-        if prim.IsA(UsdGeom.Mesh):
-            UsdSkel.BindingAPI(prim).CreateSkinningMethodAttr().Set(UsdSkel.Tokens.dualQuaternion)
-    p = tmp_path / "limb_dq.usda"
-    st.Export(str(p))
+    p = _limb_dq(tmp_path, which={"Limb"})
     usd = _items(p)[0]["bound_relative"]
     m = read(p)
     ours = float(bounds.dq_lbs_gap(m).max()) / bounds.posed_size(m)
