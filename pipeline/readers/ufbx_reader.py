@@ -358,7 +358,14 @@ def _mesh_records(r: _Read, budget, notes, items):
             if clusters:
                 skin = Skin(np.array(joints, dtype=np.int64), np.array(ibms), names,
                             np.concatenate(vv), np.concatenate(jj), np.concatenate(ww))
-                skinned.append({"node": node_i, "name": node.name, "points": pts, "skin": skin,
+                method = sk.skinning_method.name
+                dq = np.full(nv, 1.0 if method == "DUAL_QUATERNION" else 0.0)
+                if method == "BLENDED_DQ_LINEAR":
+                    dv, dw = _u32s(sk.dq_vertices), _reals(sk.dq_weights)
+                    if len(dv) == len(dw) and (not len(dv) or dv.max() < nv):
+                        dq[dv] = np.clip(dw, 0.0, 1.0)
+                skinned.append({"node": node_i, "name": node.name, "mesh": mesh.name or node.name, "points": pts,
+                                "skin": skin, "method": method, "dq": dq,
                                 "bind_world": _m44(clusters[0].bind_to_world) @ _m44(clusters[0].mesh_node_to_bone)})
         shapes = sum(len(_items(bd.channels)) for bd in _items(mesh.blend_deformers))
         meshes.append(SceneMesh(name=mesh.name or node.name, node=node_i, positions=pts, triangles=tri, to_world=to_world,
@@ -674,6 +681,8 @@ def read_ufbx(path, meshes=None, fps=None):
             "transform ufbx composes differently from its parent's times its own)",
             worst if np.isfinite(worst) else None))
 
+    mesh, method_items = _skinning_method(mesh, skinned)
+    items = method_items + items
     doc = fbx_doc.read_document(path)
     items = fbx_checks.check(doc, mesh, None, only=fbx_checks.UFBX_CHECKS) + items
     if mesh.source.get("morph_meshes") and doc is not None:
@@ -692,6 +701,52 @@ def read_ufbx(path, meshes=None, fps=None):
     return mesh.replace(up_axis=x.up, meters_per_unit=x.unit_meters)
 
 
+
+
+def _skinning_method(mesh, skinned):
+    """``(mesh, records)``: the mesh skinned as its FBX skins say.  ``SkinningType`` Linear / Rigid
+    is linear blend skinning; DualQuaternion is UsdSkel's dual-quaternion skinning (exact); Maya's
+    Blend mixes the two per vertex (``BlendWeights`` ``w``: ``(1 - w) P_linear + w P_dq``), which
+    UsdSkel cannot say: the method nearer over the frames is taken, and the record's bound is what
+    it moves a vertex, ``max w |P_dq - P_lin|`` (linear taken) or ``max (1 - w) |P_dq - P_lin|``
+    (dual quaternion taken), at the frames, over the posed size."""
+    from colossus.runtime.kernels import skin as SK
+
+    w = np.zeros(mesh.vertex_count)
+    skinned_rows = np.zeros(mesh.vertex_count, bool)
+    by_mesh = {i["mesh"]: i for i in skinned}
+    base = 0
+    for info in mesh.source.get("mesh_info") or []:
+        n = int(info["vertices"])
+        if info["name"] in by_mesh and len(by_mesh[info["name"]]["dq"]) == n:
+            w[base:base + n] = by_mesh[info["name"]]["dq"]
+            skinned_rows[base:base + n] = True
+        base += n
+    live = w[skinned_rows]
+    if not len(live) or np.all(live == 0.0):
+        return mesh, []
+    if np.all(live == 1.0):
+        return mesh.replace(skinning_method=SK.DUAL_QUATERNION), []
+    which = bounds.frames(mesh)
+    skin = bounds.skel_at(mesh, which) @ np.linalg.inv(mesh.bind_transforms)
+    p_lin = SK.skin_frames(mesh.positions, mesh.joint_indices, mesh.joint_weights,
+                           SK.fold_method(SK.CLASSIC_LINEAR, skin, mesh.geom_bind), dtype=np.float64)
+    p_dq = SK.skin_frames(mesh.positions, mesh.joint_indices, mesh.joint_weights,
+                          SK.fold_method(SK.DUAL_QUATERNION, skin, mesh.geom_bind), dtype=np.float64)
+    gap = np.linalg.norm(p_dq - p_lin, axis=-1)                       # (f, n)
+    size = bounds.posed_size(mesh, p_lin) or 1.0
+    err_lin = float(np.max(np.where(skinned_rows, w, 0.0) * gap)) / size
+    err_dq = float(np.max(np.where(skinned_rows, 1.0 - w, 0.0) * gap)) / size
+    method, err = (SK.CLASSIC_LINEAR, err_lin) if err_lin <= err_dq else (SK.DUAL_QUATERNION, err_dq)
+    names = sorted({i["mesh"] for i in skinned if np.any((i["dq"] > 0) & (i["dq"] < 1)) or i["method"] == "BLENDED_DQ_LINEAR"})
+    mesh = mesh.replace(skinning_method=method)
+    rec = notcarried.item(
+        "fbx_skinning_type", names,
+        f"Skin SkinningType Blend: per-vertex blended linear / dual-quaternion skinning "
+        f"({int(np.count_nonzero(live))} of {len(live)} vertices with a non-zero BlendWeight, up to "
+        f"{float(live.max()):.3g}) has no UsdSkel form; skinned as {method}, the nearer (the other: "
+        f"{max(err_lin, err_dq):.2g} x size)", err)
+    return mesh, [rec]
 
 
 def _check_frames(n: int) -> np.ndarray:

@@ -108,7 +108,42 @@ def _skin(top):
     return W.find(top, "Deformer", "Skin")[0]
 
 
-def test_fbx_dual_quaternion_skin_warns_once_with_a_bound_and_strict_refuses(tmp_path):
+def test_fbx_dual_quaternion_skin_through_ufbx_is_carried_as_ufbx_skins_it(tmp_path):
+    """SkinningType DualQuaternion: the asset says dualQuaternion, nothing is named, and usd-core's
+    skinning of the asset equals ufbx's own dual-quaternion skinning of the file (an independent
+    reference) within 1e-5 x size at every frame of the clip."""
+    from pxr import UsdSkel
+
+    from references.compare import AssetRig, axis_scale
+    from references.ufbx_eval import skinned_points
+    p = paths_dq(tmp_path)
+    assert _items(p) == []
+    out = tmp_path / "dq.usda"
+    assert _cli("import", p, "-o", out).exit_code == 0
+    rig = AssetRig(out)
+    from pxr import Usd
+    st = Usd.Stage.Open(str(out))
+    mesh = next(x for x in st.Traverse() if x.GetTypeName() == "Mesh")
+    assert UsdSkel.BindingAPI(mesh).GetSkinningMethodAttr().Get() == "dualQuaternion"
+    from colossus.pipeline.readers import read
+    src = read(p)
+    c = axis_scale(src.up_axis, src.meters_per_unit, rig.up_axis, rig.meters_per_unit)
+    codes = src.clips[0].times
+    theirs = skinned_points(p, codes / src.time_codes_per_second)
+    ours = rig.points(rig.clips[0], codes)
+    size = np.linalg.norm(np.ptp(ours.reshape(-1, 3), axis=0))
+    from scipy.spatial import cKDTree
+    worst = 0.0
+    for a, b in zip(ours, theirs):
+        b = b @ c[:3, :3].T + c[:3, 3]
+        worst = max(worst, cKDTree(b).query(a)[0].max(), cKDTree(a).query(b)[0].max())
+    assert worst <= 1e-5 * size, worst / size
+    # linear skinning would be off by far more: the comparison sees the method
+    from colossus.pipeline.readers.bounds import dq_lbs_gap
+    assert float(dq_lbs_gap(src).max()) > 100 * worst
+
+
+def test_fbx_dual_quaternion_skin_warns_once_with_a_bound_and_strict_refuses(tmp_path, assimp_road):
     paths = _limb(tmp_path, lambda top: W.set_child(_skin(top), "SkinningType", [("S", "DualQuaternion")]))
     for p in paths:
         items = _items(p)
@@ -117,7 +152,32 @@ def test_fbx_dual_quaternion_skin_warns_once_with_a_bound_and_strict_refuses(tmp
     _one_line_refusal(paths[0], tmp_path, "fbx_skinning_type")
 
 
-def test_fbx_blend_skin_fires_only_with_non_zero_blend_weights(tmp_path):
+def test_fbx_blend_skin_through_ufbx_takes_the_nearer_method_with_its_bound(tmp_path):
+    """Maya's per-vertex Blend: all weights 0 is linear (nothing named); one vertex at 0.5 is
+    skinned linearly (the nearer) with the bound 0.5 x its own linear / dual-quaternion gap, at
+    most half the dual-quaternion file's largest gap."""
+    from colossus.pipeline.readers import read
+    from colossus.pipeline.readers.bounds import dq_lbs_gap, posed_size
+
+    def blend(weights):
+        def edit(top):
+            s = _skin(top)
+            W.set_child(s, "SkinningType", [("S", "Blend")])
+            W.set_child(s, "Indexes", [("i", np.arange(4, dtype=np.int32))])
+            W.set_child(s, "BlendWeights", [("d", np.array(weights, dtype=np.float64))])
+        return edit
+    zero = _limb(tmp_path, blend([0, 0, 0, 0]), "zero", ascii_too=False)[0]
+    half = _limb(tmp_path, blend([0, 0.5, 0, 0]), "half", ascii_too=False)[0]
+    assert _items(zero) == [] and read(zero).skinning_method == "classicLinear"
+    items = _items(half)
+    assert [x["what"] for x in items] == ["fbx_skinning_type"] and "classicLinear" in items[0]["detail"]
+    m = read(half)
+    assert m.skinning_method == "classicLinear"
+    full = float(dq_lbs_gap(m).max()) / posed_size(m)
+    assert 0 < items[0]["bound_relative"] <= 0.5 * full * (1 + 1e-6)
+
+
+def test_fbx_blend_skin_fires_only_with_non_zero_blend_weights(tmp_path, assimp_road):
     def blend(weights):
         def edit(top):
             s = _skin(top)
