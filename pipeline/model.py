@@ -48,19 +48,88 @@ class Clip:
     name: str
     times: np.ndarray
     local: np.ndarray
+    #: (f, S) float64 blend-shape weights per frame, in the mesh's shape order
+    #: (:attr:`SkinnedMesh.blend_shapes`); ``(f, 0)`` when the mesh has none (the default)
+    shape_weights: np.ndarray = None
 
     def __post_init__(self):
         t = np.ascontiguousarray(self.times, dtype=np.float64)
         m = np.ascontiguousarray(self.local, dtype=np.float64)
+        w = np.zeros((len(t), 0)) if self.shape_weights is None else self.shape_weights
+        w = np.ascontiguousarray(w, dtype=np.float64)
         object.__setattr__(self, "times", t)
         object.__setattr__(self, "local", m)
+        object.__setattr__(self, "shape_weights", w)
         _check(t.ndim == 1, f"clip {self.name!r} times shape", "(f,)", t.shape)
         _check(m.ndim == 4 and m.shape[0] == len(t) and m.shape[2:] == (4, 4),
                f"clip {self.name!r} local shape", f"({len(t)}, b, 4, 4)", m.shape)
+        _check(w.ndim == 2 and w.shape[0] == len(t), f"clip {self.name!r} shape_weights shape", f"({len(t)}, S)",
+               w.shape)
 
     @property
     def frame_count(self) -> int:
         return len(self.times)
+
+
+@dataclass(frozen=True, eq=False)
+class BlendShape:
+    """One blend shape (morph target) as UsdSkel defines it (``UsdSkel.BlendShape``).
+
+    Attributes
+    ----------
+    name : str
+        The shape's name (unique within a mesh; ``skel:blendShapes`` / the clip weights' name).
+    indices : (m,) int32
+        The mesh points it moves (distinct; UsdSkel's ``pointIndices``).
+    offsets : (m, 3) float32
+        Mesh-space offsets of those points at weight 1.
+    inbetweens : tuple of (float, (m, 3) float32)
+        In-between shapes: ``(weight, offsets)`` at weights other than 0 and 1 (UsdSkel's
+        ``inbetweens:*``), sorted by weight.  At weight ``w`` the shape moves its points by the
+        piecewise-linear interpolation of the knots (0, 0), the in-betweens and (1, ``offsets``),
+        extrapolated by the end segments (:class:`runtime.kernels.skin.Shapes`).
+    """
+
+    name: str
+    indices: np.ndarray
+    offsets: np.ndarray
+    inbetweens: tuple = ()
+
+    def __post_init__(self):
+        i = np.ascontiguousarray(self.indices, dtype=np.int32).reshape(-1)
+        o = np.ascontiguousarray(self.offsets, dtype=np.float32)
+        object.__setattr__(self, "indices", i)
+        object.__setattr__(self, "offsets", o)
+        _check(o.shape == (len(i), 3), f"blend shape {self.name!r} offsets shape", (len(i), 3), o.shape)
+        ib = tuple(sorted(((float(w), np.ascontiguousarray(x, dtype=np.float32)) for w, x in self.inbetweens),
+                          key=lambda t: t[0]))
+        object.__setattr__(self, "inbetweens", ib)
+        for w, x in ib:
+            _check(x.shape == (len(i), 3), f"blend shape {self.name!r} in-between {w} offsets shape", (len(i), 3),
+                   x.shape)
+        ws = [w for w, _ in ib]
+        _check(len(set(ws + [0.0, 1.0])) == len(ws) + 2, f"blend shape {self.name!r} in-between weights",
+               "distinct and neither 0 nor 1", ws)
+
+    def knots(self):
+        """``(weights (k,) float64 increasing, offsets (k, m, 3) float64)``: the rest (0), the
+        in-betweens and the primary shape (1), sorted by weight."""
+        pts = [(0.0, np.zeros((len(self.indices), 3))), (1.0, self.offsets.astype(np.float64))]
+        pts += [(w, x.astype(np.float64)) for w, x in self.inbetweens]
+        pts.sort(key=lambda t: t[0])
+        return np.array([w for w, _ in pts]), np.stack([x for _, x in pts])
+
+    def replace(self, **changes) -> "BlendShape":
+        return replace(self, **changes)
+
+
+def kernel_shapes(shapes, point_count: int):
+    """The skinning pre-pass's layout (:class:`runtime.kernels.skin.Shapes`) of ``shapes``."""
+    from colossus.runtime.kernels.skin import Shapes
+
+    k = [s.knots() for s in shapes]
+    return Shapes([s.name for s in shapes], [s.indices for s in shapes], [w for w, _ in k], [o for _, o in k],
+                  point_count)
 
 
 @dataclass(frozen=True, eq=False)
@@ -157,6 +226,9 @@ class SkinnedMesh:
         default) or dual-quaternion skinning exactly as UsdSkel does it
         (:mod:`runtime.kernels.skin`).  Only the USD reader sets ``dualQuaternion`` (glTF has no
         DQS; assimp files stay linear).
+    blend_shapes : tuple of BlendShape
+        The mesh's blend shapes (morph targets), applied to ``positions`` before skinning; each
+        clip's ``shape_weights`` has one column per shape, in this order.
     """
 
     positions: np.ndarray
@@ -177,6 +249,7 @@ class SkinnedMesh:
     stored_clips: tuple = ()
     root_scale: float = 1.0
     skinning_method: str = "classicLinear"
+    blend_shapes: tuple = ()
 
     def __post_init__(self):
         conv = {
@@ -200,8 +273,22 @@ class SkinnedMesh:
         _check(self.up_axis in ("Y", "Z"), "up_axis", "'Y' or 'Z'", self.up_axis)
         _check(self.skinning_method in SKINNING_METHODS, "skinning_method", " or ".join(SKINNING_METHODS),
                self.skinning_method)
+        object.__setattr__(self, "blend_shapes", tuple(self.blend_shapes))
+        S = len(self.blend_shapes)
+        names = [s.name for s in self.blend_shapes]
+        _check(len(set(names)) == S, "blend shape names", "unique", names)
+        for s in self.blend_shapes:
+            _check(not s.indices.size or (s.indices.min() >= 0 and s.indices.max() < n and
+                                          len(np.unique(s.indices)) == len(s.indices)),
+                   f"blend shape {s.name!r} indices", f"distinct, in [0, {n})", s.indices)
+        clips = []
         for c in self.clips:
             _check(c.local.shape[1] == b, f"clip {c.name!r} joint count", b, c.local.shape[1])
+            if c.shape_weights.shape[1] == 0 and S:  # a clip that animates no shape holds them at 0
+                c = replace(c, shape_weights=np.zeros((c.frame_count, S)))
+            _check(c.shape_weights.shape[1] == S, f"clip {c.name!r} shape weight count", S, c.shape_weights.shape[1])
+            clips.append(c)
+        object.__setattr__(self, "clips", tuple(clips))
         object.__setattr__(self, "stored_clips", tuple(self.stored_clips))
         _check(not self.stored_clips or [c.name for c in self.stored_clips] == [c.name for c in self.clips],
                "stored_clips", "none, or one per clip in order", [c.name for c in self.stored_clips])
@@ -251,14 +338,16 @@ def skel_transforms(local: np.ndarray, parents: np.ndarray) -> np.ndarray:
     return out
 
 
-def skin_points(mesh: SkinnedMesh, skel: np.ndarray) -> np.ndarray:
+def skin_points(mesh: SkinnedMesh, skel: np.ndarray, shape_weights=None) -> np.ndarray:
     """The mesh skinned by its own method (linear blend: a plain numpy reference; dual quaternion:
-    the one kernel's UsdSkel DQS, :func:`runtime.kernels.skin.fold_dq`).
+    the one kernel's UsdSkel DQS, :func:`runtime.kernels.skin.fold_dq`), its blend shapes applied
+    first at ``shape_weights`` (UsdSkel's order: shapes, then skinning).
 
     Parameters
     ----------
     mesh : SkinnedMesh
     skel : (b, 4, 4) or (f, b, 4, 4) float64 skeleton-space joint transforms.
+    shape_weights : (S,) or (f, S) float64, optional  (default: every shape at 0)
 
     Returns
     -------
@@ -269,14 +358,21 @@ def skin_points(mesh: SkinnedMesh, skel: np.ndarray) -> np.ndarray:
     if single:
         skel = skel[None]
     inv_bind = np.linalg.inv(mesh.bind_transforms)
+    points = mesh.positions
+    if shape_weights is not None and len(mesh.blend_shapes):
+        from colossus.runtime.kernels import skin as SK
+        S = len(mesh.blend_shapes)
+        W = np.broadcast_to(np.asarray(shape_weights, dtype=np.float64).reshape(-1, S), (len(skel), S))
+        points = SK.shape_points(mesh.positions, kernel_shapes(mesh.blend_shapes, mesh.vertex_count), W)
     if mesh.skinning_method != "classicLinear":
         from colossus.runtime.kernels import skin as SK
-        out = SK.skin_frames(mesh.positions, mesh.joint_indices, mesh.joint_weights,
+        out = SK.skin_frames(points, mesh.joint_indices, mesh.joint_weights,
                              SK.fold_method(mesh.skinning_method, skel @ inv_bind, mesh.geom_bind), dtype=np.float64)
         return out[0] if single else out
-    p = np.c_[mesh.positions.astype(np.float64), np.ones(mesh.vertex_count)] @ mesh.geom_bind.T
+    pts = np.broadcast_to(points, (len(skel), mesh.vertex_count, 3))
     out = np.zeros((len(skel), mesh.vertex_count, 3))
     for f in range(len(skel)):
+        p = np.c_[pts[f].astype(np.float64), np.ones(mesh.vertex_count)] @ mesh.geom_bind.T
         m = skel[f] @ inv_bind  # (b, 4, 4)
         for k in range(mesh.joint_indices.shape[1]):
             w = mesh.joint_weights[:, k].astype(np.float64)

@@ -275,7 +275,7 @@ def skin_frames(points, joint_indices, joint_weights, skin_xforms, out=None, dty
 
     Parameters
     ----------
-    points : (n, 3) float32
+    points : (n, 3) float32, or (F, n, 3) per-pose points (blend shapes: :func:`shape_points`)
     joint_indices : (n, k) int, joint_weights : (n, k) float32
     skin_xforms : (F, J, 4, 4) or (J, 4, 4) float64 column-vector skinning transforms (or
         already folded ``(F, J, 12)``)
@@ -288,6 +288,9 @@ def skin_frames(points, joint_indices, joint_weights, skin_xforms, out=None, dty
     (F, n, 3) ``dtype``: ``sum_k w[v,k] * skin_xforms[f, j[v,k]] @ (p[v], 1)``.
     """
     m = _folded(skin_xforms)
+    if np.ndim(points) == 3:  # per-pose points (blend shapes' pre-pass, :func:`shape_points`)
+        return _per_pose(points, m, lambda p, mf, o: skin_frames(p, joint_indices, joint_weights, mf, o, dtype),
+                         out, dtype)
     pts, ji, jw = check_skin_inputs(points, joint_indices, joint_weights, m.shape[1])
     shape = (m.shape[0], len(pts), 3)
     dtype = np.dtype(dtype)
@@ -320,6 +323,21 @@ def part_farthest(points, joint_indices, joint_weights, skin_xforms, part_offset
     vertex : (F, P) int32       its index (-1 for an empty part)
     """
     m = _folded(skin_xforms)
+    if np.ndim(points) == 3:  # per-pose points (blend shapes' pre-pass): one pose at a time
+        P = len(part_offsets) - 1
+        F = m.shape[0]
+        if np.shape(points)[0] != F:
+            raise ValueError(f"points: expected ({F}, n, 3) per-pose points, got {np.shape(points)}")
+        c = np.asarray(centers, dtype=np.float64).reshape(F, P, 3)
+        t = None if todo is None else np.asarray(todo, dtype=np.bool_).reshape(F, P)
+        d = np.full((F, P), np.nan)
+        v = np.full((F, P), -1, dtype=np.int32)
+        for f in range(F):
+            if t is not None and not t[f].any():
+                continue
+            d[f:f + 1], v[f:f + 1] = part_farthest(points[f], joint_indices, joint_weights, m[f:f + 1], part_offsets,
+                                                   part_vertices, c[f:f + 1], None if t is None else t[f:f + 1])
+        return d, v
     pts, ji, jw = check_skin_inputs(points, joint_indices, joint_weights, m.shape[1])
     poff = np.ascontiguousarray(part_offsets, dtype=np.int64)
     pv = np.ascontiguousarray(part_vertices, dtype=np.int32)
@@ -484,8 +502,103 @@ def _skin(pts, ji, jw, m, out):
     (_skin_frames if work > PARALLEL_WORK else _skin_frames_serial)(pts, ji, jw, m, out)
 
 
+def _per_pose(points, m, one, out, dtype):
+    """:func:`skin_frames` of per-pose points ``(F, n, 3)``: pose ``f``'s points skinned by pose
+    ``f`` of ``m`` (the same kernel, one pose per call)."""
+    pts = np.asarray(points)
+    F = m.shape[0]
+    if pts.shape[0] != F or pts.shape[2:] != (3,):
+        raise ValueError(f"points: expected ({F}, n, 3) per-pose points, got {pts.shape}")
+    dtype = np.dtype(dtype)
+    if out is None:
+        out = np.empty((F, pts.shape[1], 3), dtype=dtype)
+    for f in range(F):
+        one(pts[f], m[f:f + 1], out[f:f + 1])
+    return out
+
+
 def _folded(x):
     a = np.asarray(x, dtype=np.float64)
     if (a.ndim == 3 and a.shape[-1] == 12) or (a.ndim == 4 and a.shape[-2:] == (1, DQ_WIDTH)):
         return np.ascontiguousarray(a)
     return fold(a)
+
+
+# ------------------------------------------------------------------------ blend shapes
+class Shapes:
+    """A mesh's blend shapes in the layout of the skinning pre-pass (:func:`shape_points`):
+    UsdSkel's ``BlendShape`` targets with their in-betweens.
+
+    Per shape ``s``: ``indices[s]`` (m,) int64 the points it moves (UsdSkel's ``pointIndices``;
+    all points when the shape has none), ``knots[s]`` (k,) float64 strictly increasing weights
+    and ``knot_offsets[s]`` (k, m, 3) float64 the offsets at those weights: the rest (weight 0,
+    offsets 0), the primary shape (weight 1, ``offsets``) and every in-between at its weight.
+
+    UsdSkel's blend-shape query (``UsdSkelBlendShapeQuery::ComputeSubShapeWeights``, measured on
+    usd-core in ``tests/runtime/test_kernels.py``) makes a shape's displacement at weight ``w`` the
+    piecewise-linear interpolation of the knots: between the two knots around ``w``, and below the
+    first knot or above the last one the line through the two end knots (extrapolation): with no
+    in-betweens that is ``w * offsets`` for every ``w``.  :func:`shape_points` adds the shapes'
+    displacements to the rest points; the result is skinned by the one kernel like rest points
+    (UsdSkel applies blend shapes before skinning)."""
+
+    def __init__(self, names, indices, knots, knot_offsets, point_count: int):
+        self.names = tuple(str(n) for n in names)
+        S = len(self.names)
+        self.point_count = int(point_count)
+        self.indices = [np.ascontiguousarray(i, dtype=np.int64) for i in indices]
+        self.knots = [np.ascontiguousarray(k, dtype=np.float64) for k in knots]
+        self.knot_offsets = [np.ascontiguousarray(o, dtype=np.float64) for o in knot_offsets]
+        if not (len(self.indices) == len(self.knots) == len(self.knot_offsets) == S):
+            raise ValueError(f"blend shapes: {S} names but {len(self.indices)} index arrays, {len(self.knots)} knot "
+                             f"arrays and {len(self.knot_offsets)} offset arrays")
+        for s in range(S):
+            i, k, o = self.indices[s], self.knots[s], self.knot_offsets[s]
+            if i.ndim != 1 or (i.size and (i.min() < 0 or i.max() >= self.point_count)):
+                raise ValueError(f"blend shape {self.names[s]!r}: point indices expected in [0, {self.point_count})")
+            if len(np.unique(i)) != len(i):
+                raise ValueError(f"blend shape {self.names[s]!r}: a point index repeats")
+            if k.ndim != 1 or len(k) < 2 or not np.isfinite(k).all() or (np.diff(k) <= 0).any():
+                raise ValueError(f"blend shape {self.names[s]!r}: knot weights expected finite, strictly increasing, "
+                                 f"at least 2, got {k}")
+            if o.shape != (len(k), len(i), 3):
+                raise ValueError(f"blend shape {self.names[s]!r}: knot offsets expected {(len(k), len(i), 3)}, "
+                                 f"got {o.shape}")
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    @classmethod
+    def empty(cls, point_count: int) -> "Shapes":
+        return cls((), (), (), (), point_count)
+
+    def displacement(self, s: int, w) -> np.ndarray:
+        """(F, m, 3) float64 displacement of shape ``s``'s points at weights ``w`` (F,): the knots'
+        piecewise-linear interpolation, extrapolated by the end segments (UsdSkel's sub-shape
+        weights)."""
+        k, o = self.knots[s], self.knot_offsets[s]
+        w = np.asarray(w, dtype=np.float64).reshape(-1)
+        lo = np.clip(np.searchsorted(k, w, side="right") - 1, 0, len(k) - 2)
+        a = (w - k[lo]) / (k[lo + 1] - k[lo])
+        return (1.0 - a)[:, None, None] * o[lo] + a[:, None, None] * o[lo + 1]
+
+
+def shape_points(points, shapes: Shapes | None, weights) -> np.ndarray:
+    """The skinning pre-pass for blend shapes: ``(F, n, 3)`` float32 rest points displaced by the
+    shapes at the weights ``weights`` (F, S) (one row per pose; shape order of ``shapes``), as
+    UsdSkel's ``ComputeDeformedPoints`` (float32 points).  Skin them with :func:`skin_frames` /
+    :func:`part_farthest`, which take per-pose points ``(F, n, 3)``."""
+    pts = np.ascontiguousarray(points, dtype=np.float32)
+    W = np.asarray(weights, dtype=np.float64)
+    if W.ndim == 1:
+        W = W[None]
+    S = 0 if shapes is None else len(shapes)
+    if W.ndim != 2 or W.shape[1] != S:
+        raise ValueError(f"shape weights: expected (F, {S}), got {W.shape}")
+    out = np.broadcast_to(pts.astype(np.float64), (len(W),) + pts.shape).copy()
+    for s in range(S):
+        live = W[:, s] != 0.0  # UsdSkel skips sub-shapes of weight 0
+        if live.any():
+            i = shapes.indices[s]
+            out[np.ix_(np.flatnonzero(live), i)] += shapes.displacement(s, W[live, s])
+    return np.ascontiguousarray(out, dtype=np.float32)

@@ -191,6 +191,31 @@ def naive_lbs(points, joint_indices, joint_weights, mats):
     return out
 
 
+def naive_shape_points(points, shapes, weights):
+    """Blend shapes by UsdSkel's sub-shape rule, one shape and one pose at a time: ``shapes`` is a
+    list of ``(indices (m,), offsets (m, 3), inbetweens [(weight, (m, 3) offsets)])``,
+    ``weights`` (F, S).  Per shape the sub-shapes are the in-betweens, a null shape (no offsets)
+    at weight 0 and the primary at weight 1, sorted by weight; a weight ``w`` between two of
+    them gives the upper ``a = (w - w_lo) / (w_hi - w_lo)`` and the lower ``1 - a``; below the
+    first (above the last) the first (last) two extrapolate the same way.  Returns (F, n, 3)
+    float64 displaced points."""
+    out = np.repeat(np.asarray(points, dtype=np.float64)[None], len(weights), 0)
+    for f, wf in enumerate(np.asarray(weights, dtype=np.float64)):
+        for (idx, off, ib), w in zip(shapes, wf):
+            if w == 0:
+                continue
+            subs = sorted([(0.0, np.zeros((len(idx), 3))), (1.0, np.asarray(off, dtype=np.float64))]
+                          + [(float(a), np.asarray(o, dtype=np.float64)) for a, o in ib], key=lambda t: t[0])
+            lo = 0
+            while lo < len(subs) - 2 and subs[lo + 1][0] <= w:
+                lo += 1
+            (w0, o0), (w1, o1) = subs[lo], subs[lo + 1]
+            a = (w - w0) / (w1 - w0)
+            for i, v in enumerate(idx):
+                out[f, v] += (1 - a) * o0[i] + a * o1[i]
+    return out
+
+
 def naive_dqs(points, joint_indices, joint_weights, mats, geom_bind=None):
     """Dual-quaternion skinning by UsdSkel's definition (``_SkinPointsDQS`` in
     ``pxr/usd/usdSkel/utils.cpp``), one vertex at a time; (F, n, 3) float64.

@@ -800,3 +800,113 @@ def test_dq_certificate_fails_closed_outside_its_hypotheses(case):
         bad[1:] = False  # only the first interval's scales change
     assert (c.status[bad] == 4).all() and not ((c.status[bad] == 1) | (c.status[bad] == 2)).any()
     assert all("hypotheses" in f.get("reason", "") for f in c.failures if f["interval"] in np.flatnonzero(bad))
+
+
+# -- blend shapes (the pre-pass of the one kernel) ---------------------------------------------
+def _random_shapes(rng, n, S=4, F=6, inbetweens=True):
+    """Random blend shapes (sparse and dense, with in-betweens at weights below 0, inside (0, 1)
+    and above 1) and per-frame weights in [-1.5, 2.5]: ``(shapes, weights)``, shapes as
+    ``(name, indices, offsets, [(weight, offsets)])``."""
+    shapes = []
+    for s in range(S):
+        dense = s == 0
+        idx = np.arange(n) if dense else np.sort(rng.choice(n, size=max(1, n // 3), replace=False))
+        off = rng.normal(size=(len(idx), 3)).astype(np.float32)
+        ib = []
+        if inbetweens and s % 2 == 1:
+            for w in rng.choice([-0.5, 0.25, 0.5, 0.8, 1.5], size=int(rng.integers(1, 4)), replace=False):
+                ib.append((float(w), rng.normal(size=(len(idx), 3)).astype(np.float32)))
+        shapes.append((f"shape{s}", idx, off, ib))
+    W = rng.uniform(-1.5, 2.5, size=(F, S))
+    W[0] = 0.0
+    W[1, 0] = 0.0
+    W[2, :] = [0.5, 0.25, 1.0, -0.5][:S]  # exactly on knots
+    return shapes, W
+
+
+def _kernel_shapes(shapes, n):
+    from colossus.pipeline.model import BlendShape, kernel_shapes
+
+    return kernel_shapes([BlendShape(nm, i, o, tuple(ib)) for nm, i, o, ib in shapes], n)
+
+
+def _usd_shaped_skin(pts, ji, jw, m, G, shapes, W, method="classicLinear"):
+    """usd-core's own blend shapes (``UsdSkel.BlendShapeQuery``: sub-shape weights,
+    ``ComputeDeformedPoints``) then its own skinning (``UsdSkel.SkinPoints``), every frame."""
+    from pxr import Sdf, UsdGeom
+
+    st = Usd.Stage.CreateInMemory()
+    UsdSkel.Root.Define(st, "/R")
+    mesh = UsdGeom.Mesh.Define(st, "/R/M")
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts)))
+    targets = []
+    for name, idx, off, ib in shapes:
+        bs = UsdSkel.BlendShape.Define(st, f"/R/M/{name}")
+        bs.CreateOffsetsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(off)))
+        bs.CreatePointIndicesAttr(Vt.IntArray.FromNumpy(np.asarray(idx, dtype=np.int32)))
+        for k, (w, o) in enumerate(ib):
+            x = bs.CreateInbetween(f"ib{k}")
+            x.SetWeight(w)
+            x.SetOffsets(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(o)))
+        targets.append(Sdf.Path(f"/R/M/{name}"))
+    b = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    b.CreateBlendShapesAttr([s[0] for s in shapes])
+    b.CreateBlendShapeTargetsRel().SetTargets(targets)
+    q = UsdSkel.BlendShapeQuery(b)
+    offsets, indices = q.ComputeSubShapePointOffsets(), q.ComputeBlendShapePointIndices()
+    g = Gf.Matrix4d(*np.asarray(G).T.reshape(-1).tolist())
+    idx = Vt.IntArray.FromNumpy(np.where(jw == 0, 0, ji).reshape(-1).astype(np.int32))
+    wts = Vt.FloatArray.FromNumpy(jw.reshape(-1))
+    out = []
+    for mf, wf in zip(m, W):
+        p = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts))
+        sw, bi, si = q.ComputeSubShapeWeights(Vt.FloatArray.FromNumpy(wf.astype(np.float32)))
+        assert q.ComputeDeformedPoints(sw, bi, si, indices, offsets, p)
+        xf = Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.swapaxes(mf, -1, -2)))
+        assert UsdSkel.SkinPoints(method, g, xf, idx, wts, ji.shape[1], p)
+        out.append(np.asarray(p, dtype=np.float64))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("method", ["classicLinear", "dualQuaternion"])
+@pytest.mark.parametrize("seed", range(5))
+def test_blend_shapes_then_skinning_match_usdskel_on_every_frame(method, seed):
+    """The pre-pass (shapes at weights, in-betweens and extrapolation included) then the one
+    kernel equals usd-core's BlendShapeQuery + SkinPoints within 1e-6 x size on random rigs."""
+    rng = np.random.default_rng(300 + seed)
+    pts, ji, jw, m, G = _dq_rig(rng, n=200, F=6, kind="rigid" if method == "dualQuaternion" else "shear")
+    shapes, W = _random_shapes(rng, len(pts), F=6)
+    ref = _usd_shaped_skin(pts, ji, jw, m, G, shapes, W, method)
+    shaped = SK.shape_points(pts, _kernel_shapes(shapes, len(pts)), W)
+    got = SK.skin_frames(shaped, ji, jw, SK.fold_method(method, m, G), dtype=np.float64)
+    size = np.linalg.norm(ref.reshape(-1, 3).max(0) - ref.reshape(-1, 3).min(0))
+    assert np.abs(got - ref).max() <= 1e-6 * size
+    # and the naive reference of the shapes, skinned by the naive LBS
+    if method == "classicLinear":
+        naive_pts = naive.naive_shape_points(pts, [s[1:] for s in shapes], W)
+        np.testing.assert_allclose(shaped, naive_pts, atol=1e-6 * np.abs(naive_pts).max())
+        ref2 = np.array([naive.naive_lbs(naive_pts[f], ji, jw, (m @ G)[f:f + 1])[0] for f in range(len(m))])
+        assert np.abs(got - ref2).max() <= 1e-6 * size
+
+
+def test_blend_shapes_part_farthest_per_pose_points():
+    """part_farthest on per-pose (shaped) points equals the distances of the skinned shaped points."""
+    rng = np.random.default_rng(5)
+    pts, ji, jw, m = _random_skin(rng, n=120, F=4)
+    shapes, W = _random_shapes(rng, len(pts), F=4)
+    shaped = SK.shape_points(pts, _kernel_shapes(shapes, len(pts)), W)
+    sk = SK.skin_frames(shaped, ji, jw, m, dtype=np.float64)
+    verts = np.arange(0, 120, 3)
+    offs = np.array([0, 20, len(verts)])
+    centers = rng.normal(size=(4, 2, 3))
+    todo = np.ones((4, 2), dtype=bool)
+    todo[1, 0] = False
+    d, v = SK.part_farthest(shaped, ji, jw, m, offs, verts, centers, todo=todo)
+    for f in range(4):
+        for p in range(2):
+            if not todo[f, p]:
+                assert np.isnan(d[f, p]) and v[f, p] == -1
+                continue
+            vs = verts[offs[p]:offs[p + 1]]
+            dist = np.linalg.norm(sk[f, vs] - centers[f, p], axis=1)
+            assert d[f, p] == pytest.approx(dist.max(), abs=1e-9)
