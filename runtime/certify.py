@@ -84,6 +84,10 @@ class Rig:
     #: "classicLinear" or "dualQuaternion" (the mesh's ``primvars:skel:skinningMethod``): a
     #: dual-quaternion rig is certified by :mod:`runtime.certify_dq` (exact skinning at samples)
     skinning_method: str = SK.CLASSIC_LINEAR
+    #: the mesh's blend shapes (:class:`runtime.kernels.skin.Shapes`) or None: :func:`sampled`
+    #: skins the displaced points at poses given shape weights; between samples
+    #: :mod:`runtime.certify_shapes` certifies them
+    shapes: object = None
 
     def __post_init__(self):
         J = len(self.bind)
@@ -179,8 +183,9 @@ class Sampled:
     spheres: np.ndarray
 
 
-def sampled(rig: Rig, skel, tol_abs: float, tol_rel: float, exact=None) -> Sampled:
-    """Certify the part spheres at poses ``skel`` (F, J, 4, 4) (skeleton space).
+def sampled(rig: Rig, skel, tol_abs: float, tol_rel: float, exact=None, shape_weights=None) -> Sampled:
+    """Certify the part spheres at poses ``skel`` (F, J, 4, 4) (skeleton space), with the
+    rig's blend shapes at ``shape_weights`` (F, S) (none: every shape at 0).
 
     A (pose, part) passes a bound tier when the bound is at most ``R (1 + tol_rel) + tol_abs``
     (the proof's verdict threshold); otherwise the part's vertices are skinned exactly
@@ -198,10 +203,23 @@ def sampled(rig: Rig, skel, tol_abs: float, tol_rel: float, exact=None) -> Sampl
         tier[(tier == 2) & (db <= limit)] = 1
     else:  # dual quaternion: every part skinned exactly (runtime.certify_dq)
         kb = db = np.full(R.shape, np.inf)
+    points = rig.points
+    if shape_weights is not None and rig.shapes is not None and len(rig.shapes):
+        W = np.asarray(shape_weights, dtype=np.float64).reshape(len(skel), len(rig.shapes))
+        shaped = (W != 0).any(1)
+        if shaped.any():  # tests K and D bound the rest points: a pose under shapes is skinned exactly,
+            tier[shaped] = 2  # its displaced points (the one kernel's pre-pass), which is sampled exactly
+            kb, db = kb.copy(), db.copy()
+            kb[shaped] = np.inf
+            db[shaped] = np.inf
+            points = SK.shape_points(rig.points, rig.shapes, W)
     todo = tier == 2
     if exact is not None:
         todo = todo | exact
-    if CHUNKED:
+    if points is not rig.points:
+        d, v = SK.part_farthest(points, rig.joint_indices, rig.joint_weights, rig.skin_mats(skel),
+                                rig.vert_offsets, rig.verts, sph[..., :3], todo=todo)
+    elif CHUNKED:
         d, v, _ = FA.farthest(rig.points, rig.joint_indices, rig.joint_weights, rig.skin_mats(skel), rig.vert_offsets,
                               rig.verts, rig.part_joint, sph[..., :3], todo, rig.chunks)
     else:

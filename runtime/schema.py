@@ -16,7 +16,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -41,6 +41,8 @@ PARTS_ATTRIBUTES = {
 PROVENANCE_KEY = "colossus"
 #: A SkelAnimation's customData key with the clip's own name when it is not a valid prim name.
 CLIP_NAME_KEY = "colossus:clipName"
+#: customData key on a blend shape whose prim name differs from its source name
+SHAPE_NAME_KEY = "colossus:shapeName"
 #: A SkelAnimation's customData key describing how the clip was sampled from its source
 #: (``sourceKeys``, ``interpolation``, ``sampling``, ``keysOnGrid``, ``errorBound`` stage units).
 CLIP_SOURCE_KEY = "colossus:source"
@@ -293,12 +295,34 @@ class Clip:
     #: the names the clip had in its source where the asset's differs (a prim name is a USD
     #: identifier: ``Take 001`` becomes ``Take_001``), from the animation's customData
     source_names: tuple = ()
+    #: blend-shape weights (UsdSkel's ``blendShapeWeights``): sample times (nW,) and values
+    #: (nW, S) float64 in the **mesh's** shape order (``skel:blendShapes``; a shape the
+    #: animation does not name is 0, UsdSkel's mapper), linearly interpolated between samples
+    #: and held beyond the ends; none: every shape at 0
+    tw: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    vw: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
+    def shape_weights(self, times, shape_count: int) -> np.ndarray:
+        """(T, S) float64 blend-shape weights at ``times`` (T,) as UsdSkel interpolates the
+        ``blendShapeWeights`` samples: linear between samples, held before the first and after
+        the last (float32 arithmetic in usd-core: within 1e-7 relative of these)."""
+        times = np.atleast_1d(np.asarray(times, dtype=np.float64))
+        out = np.zeros((len(times), shape_count))
+        if len(self.tw) == 0 or shape_count == 0:
+            return out
+        for s in range(min(shape_count, self.vw.shape[1])):
+            out[:, s] = np.interp(times, self.tw, self.vw[:, s])
+        return out
 
     @classmethod
-    def on_grid(cls, name: str, times, t, q, s, path: str | None = None) -> "Clip":
+    def on_grid(cls, name: str, times, t, q, s, path: str | None = None, weights=None) -> "Clip":
         """A clip whose three attributes share the frames ``times`` (f,) and that animates every
-        joint of the skeleton in order: ``t`` (f, J, 3), ``q`` (f, J, 4), ``s`` (f, J, 3)."""
+        joint of the skeleton in order: ``t`` (f, J, 3), ``q`` (f, J, 4), ``s`` (f, J, 3); and
+        every blend shape of the mesh in order, ``weights`` (f, S) (none: no shape)."""
         times = np.ascontiguousarray(times, dtype=np.float64)
         f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)
+        w = np.zeros((len(times), 0)) if weights is None else f64(weights)
+        tw = times if w.shape[1] else np.zeros(0)
         return cls(name, name if path is None else path, times, f64(t), times, f64(q), times, f64(s),
-                   np.arange(np.shape(t)[1], dtype=np.int64), times)
+                   np.arange(np.shape(t)[1], dtype=np.int64), times, tw=tw,
+                   vw=w if w.shape[1] else np.zeros((0, 0)))

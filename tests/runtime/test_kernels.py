@@ -910,3 +910,167 @@ def test_blend_shapes_part_farthest_per_pose_points():
             vs = verts[offs[p]:offs[p + 1]]
             dist = np.linalg.norm(sk[f, vs] - centers[f, p], axis=1)
             assert d[f, p] == pytest.approx(dist.max(), abs=1e-9)
+
+
+# -- blend-shape certificate (runtime.certify_shapes) -------------------------------------------
+from colossus.runtime import certify_shapes as CS  # noqa: E402
+
+
+def _skin_naive(method, pts, ji, jw, skin):
+    """Naive skinning of per-pose points ``pts`` (F, n, 3) by ``skin`` (F, J, 4, 4)."""
+    f = naive.naive_dqs if method == "dualQuaternion" else naive.naive_lbs
+    return np.array([f(pts[k], ji, jw, skin[k:k + 1])[0] for k in range(len(skin))])
+
+
+def random_shape_rig(rng, method="classicLinear", J=5, n=200, F=6, angle=0.3, slack=0.1, S=3):
+    """A random rig with blend shapes (in-betweens included) whose weights are animated, skinned
+    by ``method``; its spheres fitted to the frames (plus ``slack`` of the radius)."""
+    parents = np.array([-1] + [int(rng.integers(0, j)) for j in range(1, J)])
+    rest_t = rng.normal(size=(J, 3))
+    rest_t[0] = 0
+    rest = naive.trs(rest_t, np.tile([0, 0, 0, 1.0], (J, 1)), np.ones((J, 3)))
+    bind = naive.compose(rest, parents)
+    pts = (bind[rng.integers(0, J, n), :3, 3] + 0.4 * rng.normal(size=(n, 3))).astype(np.float32)
+    d = np.linalg.norm(pts[:, None] - bind[None, :, :3, 3], axis=2)
+    ji = np.argsort(d, 1)[:, :4].astype(np.int32)
+    w = np.exp(-np.take_along_axis(d, ji, 1) ** 2) * (rng.random((n, 4)) < 0.8)
+    w[:, 0] += 1e-3
+    jw = (w / w.sum(1, keepdims=True)).astype(np.float32)
+    owner = ji[:, 0]
+    order = np.argsort(owner, kind="stable")
+    voff = np.searchsorted(owner[order], np.arange(J + 1))
+    shapes = []
+    for s in range(S):
+        idx = np.sort(rng.choice(n, size=n // 2, replace=False))
+        off = (0.3 * rng.normal(size=(len(idx), 3))).astype(np.float32)
+        ib = [(0.5, (0.3 * rng.normal(size=(len(idx), 3))).astype(np.float32))] if s % 2 else []
+        shapes.append((f"s{s}", idx, off, ib))
+    ks = _kernel_shapes(shapes, n)
+    times = np.arange(F, dtype=float)
+    W = rng.uniform(-0.3, 1.3, size=(F, S))
+    W[rng.random((F, S)) < 0.2] = 0.0
+    q = np.empty((F, J, 4))
+    cur = Rotation.random(J, random_state=int(rng.integers(1 << 30)))
+    for f in range(F):
+        q[f] = cur.as_quat()
+        cur = Rotation.from_rotvec(rng.normal(size=(J, 3)) * angle / 2) * cur
+    t = rest_t[None] + 0.2 * rng.normal(size=(F, J, 3))
+    sc = np.ones((F, J, 3))
+    clip = Clip("c", "/c", times, t, times, q.astype(np.float32).astype(float), times, sc, np.arange(J), times,
+                tw=times, vw=W.astype(np.float32).astype(float))
+    skel = naive.compose(naive.trs(t, clip.vr, sc), parents)
+    shaped = SK.shape_points(pts, ks, clip.vw)
+    y = _skin_naive(method, shaped, ji, jw, skel @ np.linalg.inv(bind))
+    centers, radii = np.zeros((J, 3)), np.zeros(J)
+    for p in range(J):
+        vs = order[voff[p]:voff[p + 1]]
+        loc = np.einsum("fij,fvj->fvi", np.linalg.inv(skel[:, p]),
+                        np.concatenate([y[:, vs], np.ones((F, len(vs), 1))], 2))[..., :3]
+        lo, hi = loc.reshape(-1, 3).min(0), loc.reshape(-1, 3).max(0)
+        centers[p] = (lo + hi) / 2
+        radii[p] = np.linalg.norm(loc - centers[p], axis=2).max() * (1 + slack) + 1e-3
+    rig = C.Rig(pts, ji, jw, np.eye(4), bind, rest, parents, np.arange(J), centers, radii, voff, order,
+                skinning_method=method, shapes=ks)
+    return rig, clip, skel
+
+
+def _dense_shapes(rig, clip, t0, t1, steps=48):
+    """(steps - 1, P) joint-space farthest distance of every part at sub-steps of [t0, t1]: joints
+    by naive lerp / slerp / T R S, weights by lerp, shapes by naive_shape_points, skin naive."""
+    out = []
+    shapes = [(rig.shapes.indices[s], rig.shapes.knot_offsets[s][list(rig.shapes.knots[s]).index(1.0)],
+               [(k, o) for k, o in zip(rig.shapes.knots[s], rig.shapes.knot_offsets[s]) if k not in (0.0, 1.0)])
+              for s in range(len(rig.shapes))]
+    for a in np.linspace(0, 1, steps + 1)[1:-1]:
+        tt = t0 + a * (t1 - t0)
+        i = min(int(np.floor(tt)), len(clip.times) - 2)
+        f = tt - i
+        skel = naive.compose(naive.trs((1 - f) * clip.vt[i] + f * clip.vt[i + 1],
+                                       naive.slerp(clip.vr[i], clip.vr[i + 1], f),
+                                       _half_lerp(clip.vs[i], clip.vs[i + 1], f))[None], rig.parents)[0]
+        wt = (1 - f) * clip.vw[i] + f * clip.vw[i + 1]
+        pts = naive.naive_shape_points(rig.points, shapes, wt[None])
+        y = _skin_naive(rig.skinning_method, pts, rig.joint_indices, rig.joint_weights, (skel @ rig.inv_bind)[None])[0]
+        far = np.zeros(rig.P)
+        for p in range(rig.P):
+            vs = rig.verts[rig.vert_offsets[p]:rig.vert_offsets[p + 1]]
+            N = skel[rig.part_joint[p]]
+            loc = (y[vs] - N[:3, 3]) @ np.linalg.inv(N[:3, :3]).T
+            far[p] = np.linalg.norm(loc - rig.part_centers[p], axis=1).max() if len(vs) else 0
+        out.append(far)
+    return np.array(out)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_shape_certificate_is_sound_against_dense_brute_force(seed):
+    """20 random blend-shape rigs (linear and dual-quaternion skinning, in-betweens, weights of both
+    signs): no certified interval has a dense in-between pose outside a sphere, and the growth
+    bound is never below the dense maximum."""
+    rng = np.random.default_rng(700 + seed)
+    method = "dualQuaternion" if seed % 3 == 2 else "classicLinear"
+    rig, clip, skel = random_shape_rig(rng, method, angle=0.2 + 0.05 * (seed % 4), slack=0.05 + 0.05 * (seed % 3))
+    s = C.sampled(rig, skel, 0.0, 1e-6, shape_weights=clip.vw)
+    ok = ~(s.dist > s.spheres[..., 3] * (1 + 1e-6))
+    assert ok[(clip.vw != 0).any(1)].all()  # the spheres were fitted to the shaped frames
+    c = CS.certificate(rig, clip, clip.times, s.bound, ok, 0.0, 1e-6)
+    g = CS.certificate(rig, clip, clip.times, s.bound, ok, 0.0, 0.0, rho=np.zeros(rig.P), growth=True, max_depth=5)
+    certified = (c.status <= 2)
+    for i in range(len(clip.times) - 1):
+        far = _dense_shapes(rig, clip, clip.times[i], clip.times[i + 1]).max(0)
+        assert not (certified[i] & (far > rig.part_radii * (1 + 1e-6))).any(), (i, far, rig.part_radii)
+        assert np.all(far <= g.bound[i] * (1 + 1e-9)), (i, far, g.bound[i])
+    for f in c.failures:
+        if f["definite"]:
+            assert f["excess"] > 0
+    if method == "classicLinear":  # the bound is not vacuous (DQS: as far as the DQS certificate itself
+        assert certified.mean() > 0.3  # goes on these random rotations, hemisphere flips left undecided)
+
+
+def test_shape_bound_is_tight_enough_that_one_percent_less_is_caught():
+    """The dense check has teeth: on some interval the growth bound is within 1% of the dense
+    maximum (a bound 1% smaller would fail the soundness test above)."""
+    rng = np.random.default_rng(12)
+    rig, clip, skel = random_shape_rig(rng, "classicLinear", angle=0.1)
+    s = C.sampled(rig, skel, 0.0, 1e-6, shape_weights=clip.vw)
+    g = CS.certificate(rig, clip, clip.times, s.bound, np.ones_like(s.bound, bool), 0.0, 0.0,
+                       rho=np.zeros(rig.P), growth=True, max_depth=8)
+    caught = False
+    for i in range(len(clip.times) - 1):
+        far = _dense_shapes(rig, clip, clip.times[i], clip.times[i + 1], steps=64).max(0)
+        far = np.maximum(far, np.maximum(s.dist[i], s.dist[i + 1]))  # joint = stage space (world = I)
+        assert np.all(far <= g.bound[i] * (1 + 1e-6))  # the exact tiers skin float32 points: 6e-8 apart
+        caught |= bool(np.any(0.99 * g.bound[i] < far))
+    assert caught
+
+
+def test_vertex_leaving_only_between_samples_by_a_shape_weight_is_caught_with_its_interval():
+    """A still skeleton and one shape whose in-between (at weight 0.5) pushes a vertex far out:
+    the weight goes 0 -> 1 between the samples, where the vertex is inside; half-way it is out."""
+    parents = np.array([-1])
+    rest = naive.trs([[0, 0, 0]], [[0, 0, 0, 1.0]], np.ones((1, 3)))
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float32)
+    ji = np.zeros((4, 1), np.int32)
+    jw = np.ones((4, 1), np.float32)
+    shapes = [("bulge", np.array([1]), np.array([[0.1, 0, 0]], np.float32),
+               [(0.5, np.array([[3.0, 0, 0]], np.float32))])]
+    ks = _kernel_shapes(shapes, 4)
+    times = np.array([0.0, 1.0])
+    clip = Clip("b", "/b", times, np.zeros((2, 1, 3)), times, np.tile([0, 0, 0, 1.0], (2, 1, 1)), times,
+                np.ones((2, 1, 3)), np.array([0]), times, tw=times, vw=np.array([[0.0], [1.0]]))
+    c = np.zeros(3)
+    r = 1.2  # holds every vertex at both samples (1.1 at most), not the bulge (4.0 at w = 0.5)
+    rig = C.Rig(pts, ji, jw, np.eye(4), rest, rest, parents, [0], c[None], [r], [0, 4], np.arange(4), shapes=ks)
+    skel = naive.compose(naive.trs(clip.vt, clip.vr, clip.vs), parents)
+    s = C.sampled(rig, skel, 0.0, 1e-6, shape_weights=clip.vw)
+    ok = ~(s.bound > s.spheres[..., 3] * (1 + 1e-6))
+    assert ok.all()
+    res = CS.certificate(rig, clip, times, s.bound, ok, 0.0, 1e-6)
+    assert res.status[0, 0] == 3 and len(res.failures) == 1
+    f = res.failures[0]
+    assert (f["t0"], f["t1"]) == (0.0, 1.0) and f["definite"] and f["vertex"] == 1
+    assert abs(f["time"] - 0.5) <= 0.07 and f["excess"] > 2.0
+    # and a plain linear shape (no in-between) with the same ends is certified: its path is a chord
+    ks2 = _kernel_shapes([("lin", np.array([1]), np.array([[0.1, 0, 0]], np.float32), [])], 4)
+    rig2 = C.Rig(pts, ji, jw, np.eye(4), rest, rest, parents, [0], c[None], [r], [0, 4], np.arange(4), shapes=ks2)
+    res2 = CS.certificate(rig2, clip, times, s.bound, ok, 0.0, 1e-6)
+    assert res2.status[0, 0] <= 2
