@@ -123,6 +123,45 @@ class BlendShape:
         return replace(self, **changes)
 
 
+def shape_table(shapes, point_count: int) -> np.ndarray:
+    """(n, 3 K) float32: every vertex's offsets in every knot of every shape (0 where a shape does
+    not move it): two vertices with equal rows move alike under every weight."""
+    cols = []
+    for s in shapes:
+        for x in [s.offsets] + [o for _, o in s.inbetweens]:
+            c = np.zeros((point_count, 3), dtype=np.float32)
+            c[s.indices] = x
+            cols.append(c)
+    return np.concatenate(cols, axis=1) if cols else np.zeros((point_count, 0), dtype=np.float32)
+
+
+def remap_shapes(shapes, old_to_new, new_count: int) -> tuple:
+    """The shapes on a re-indexed mesh: old vertex ``v`` is new vertex ``old_to_new[v]`` (-1:
+    dropped).  Where several old vertices become one, the first one's offsets are kept (callers
+    merge only vertices whose offsets agree: :func:`shape_table`)."""
+    out = []
+    o2n = np.asarray(old_to_new, dtype=np.int64)
+    for s in shapes:
+        new = o2n[s.indices]
+        live = new >= 0
+        new_live = new[live]
+        _, first = np.unique(new_live, return_index=True)
+        first = np.sort(first)
+        sel = np.flatnonzero(live)[first]
+        out.append(BlendShape(s.name, o2n[s.indices[sel]], s.offsets[sel],
+                              tuple((w, o[sel]) for w, o in s.inbetweens)))
+    return tuple(out)
+
+
+def transform_shapes(shapes, linear) -> tuple:
+    """The shapes' offsets through the 3x3 ``linear`` map (points went through an affine map
+    with this linear part: offsets, being differences, take the linear part only)."""
+    A = np.asarray(linear, dtype=np.float64)
+    mv = lambda o: (o.astype(np.float64) @ A.T).astype(np.float32)
+    return tuple(BlendShape(s.name, s.indices, mv(s.offsets), tuple((w, mv(o)) for w, o in s.inbetweens))
+                 for s in shapes)
+
+
 def kernel_shapes(shapes, point_count: int):
     """The skinning pre-pass's layout (:class:`runtime.kernels.skin.Shapes`) of ``shapes``."""
     from colossus.runtime.kernels.skin import Shapes

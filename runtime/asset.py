@@ -71,6 +71,9 @@ class ColliderData:
     bounds: BoundData
     faces_shared: bool = False  # some face is in more than one part (--parts any)
     skinning_method: str = "classicLinear"  # or "dualQuaternion" (primvars:skel:skinningMethod)
+    #: the mesh's UsdSkel blend shapes (:class:`runtime.kernels.skin.Shapes`, ``skel:blendShapes``
+    #: order; empty when it binds none); each clip's ``tw`` / ``vw`` weights are in this order
+    shapes: object = None
     clips: list = field(default_factory=list)
     static_local_to_world: np.ndarray | None = None
     stage: object = None  # kept open only when the skeleton's transform is animated
@@ -141,8 +144,11 @@ def _samples(attr, count, width, what):
     return np.asarray(times, dtype=np.float64), np.ascontiguousarray(arr)
 
 
-def read_clip(prim, joint_index) -> Clip:
-    """One ``SkelAnimation`` prim as a :class:`runtime.schema.Clip` (raises :class:`ColliderError`)."""
+def read_clip(prim, joint_index, shape_index=None) -> Clip:
+    """One ``SkelAnimation`` prim as a :class:`runtime.schema.Clip` (raises :class:`ColliderError`).
+    ``shape_index`` maps the mesh's blend-shape names to their order (``skel:blendShapes``): the
+    animation's ``blendShapeWeights`` are read in that order (a shape it does not name is 0, one
+    the mesh lacks is ignored: UsdSkel's mapper)."""
     from pxr import UsdSkel
 
     anim = UsdSkel.Animation(prim)
@@ -164,11 +170,97 @@ def read_clip(prim, joint_index) -> Clip:
                   (prim.GetCustomDataByKey(schema.CLIP_SOURCE_KEY) or {}).get("sourceName")):
         if isinstance(value, str) and value and value != prim.GetName() and value not in aliases:
             aliases.append(value)
+    tw, vw = _shape_weights(anim, shape_index or {}, where)
+    if len(tw):
+        times = np.union1d(times, tw)
     return Clip(
+        tw=tw, vw=vw,
         name=prim.GetName(), path=where,
         tt=tt, vt=np.ascontiguousarray(vt[:, keep]), tr=tr, vr=np.ascontiguousarray(vr[:, keep]),
         ts=ts, vs=np.ascontiguousarray(vs[:, keep]), anim_to_skel=amap[keep], times=times,
         source_names=tuple(aliases))
+
+
+def _shape_weights(anim, shape_index, where):
+    """``(times (nW,), weights (nW, S))`` of an animation's ``blendShapeWeights`` in the mesh's
+    shape order (``shape_index``: name -> index)."""
+    S = len(shape_index)
+    names = list(anim.GetBlendShapesAttr().Get() or []) if anim.GetBlendShapesAttr() else []
+    attr = anim.GetBlendShapeWeightsAttr()
+    if not S or not names or not attr or not attr.HasAuthoredValue():
+        return np.zeros(0), np.zeros((0, S))
+    times = list(attr.GetTimeSamples())
+    raw = [attr.Get(t) for t in times] if times else [attr.Get()]
+    times = times or [0.0]  # a default value holds at every time: one sample
+    if any(v is None or len(v) != len(names) for v in raw):
+        raise ColliderError(f"{where}.blendShapeWeights: expected {len(names)} weights per sample (blendShapes)")
+    times = np.asarray(times, dtype=np.float64)
+    vals = np.array([np.asarray(v, dtype=np.float64) for v in raw]).reshape(len(times), len(names))
+    if not np.isfinite(vals).all():
+        raise ColliderError(f"{where}.blendShapeWeights: a weight is not finite")
+    out = np.zeros((len(times), S))
+    for a, n in enumerate(names):
+        s = shape_index.get(str(n))
+        if s is not None:
+            out[:, s] = vals[:, a]
+    return times, out
+
+
+def read_shapes(mesh, point_count: int):
+    """The mesh prim's UsdSkel blend shapes (``skel:blendShapes`` names, ``skel:blendShapeTargets``
+    prims: ``offsets``, ``pointIndices``, ``inbetweens:*``) as :class:`runtime.kernels.skin.Shapes`
+    (raises :class:`ColliderError` on a shape UsdSkel would not apply as written: counts that
+    differ, an index out of range or repeated, a value that is not finite, an in-between at
+    weight 0 or 1 or two at one weight)."""
+    from pxr import UsdSkel
+
+    from .kernels.skin import Shapes
+
+    b = UsdSkel.BindingAPI(mesh)
+    names = [str(n) for n in (b.GetBlendShapesAttr().Get() or [])] if b.GetBlendShapesAttr() else []
+    targets = b.GetBlendShapeTargetsRel().GetTargets() if b.GetBlendShapeTargetsRel() else []
+    where = mesh.GetPath()
+    if not names and not targets:
+        return Shapes.empty(point_count)
+    if len(names) != len(targets):
+        raise ColliderError(f"{where}: skel:blendShapes names {len(names)} shapes but skel:blendShapeTargets "
+                            f"{len(targets)}")
+    if len(set(names)) != len(names):
+        raise ColliderError(f"{where}: skel:blendShapes repeats a name")
+    idx_all, knots, offs = [], [], []
+    stage = mesh.GetStage()
+    for name, path in zip(names, targets):
+        prim = stage.GetPrimAtPath(path)
+        bs = UsdSkel.BlendShape(prim)
+        if not prim or not prim.IsA(UsdSkel.BlendShape):
+            raise ColliderError(f"{where}: blend shape target {path} is not a BlendShape prim")
+        off = np.asarray(bs.GetOffsetsAttr().Get() or [], dtype=np.float64).reshape(-1, 3)
+        pi = bs.GetPointIndicesAttr().Get() if bs.GetPointIndicesAttr().HasAuthoredValue() else None
+        idx = np.arange(point_count) if pi is None else np.asarray(pi, dtype=np.int64)
+        if len(off) != len(idx):
+            raise ColliderError(f"{path}: {len(off)} offsets for {len(idx)} points")
+        if idx.size and (idx.min() < 0 or idx.max() >= point_count or len(np.unique(idx)) != len(idx)):
+            raise ColliderError(f"{path}.pointIndices: expected distinct indices in 0..{point_count - 1}")
+        pts = [(0.0, np.zeros_like(off)), (1.0, off)]
+        for ib in bs.GetInbetweens():
+            w = ib.GetWeight()
+            o = np.asarray(ib.GetOffsets() or [], dtype=np.float64).reshape(-1, 3)
+            if w is None or len(o) != len(idx):
+                raise ColliderError(f"{path}: in-between {ib.GetAttr().GetName()} has no weight or "
+                                    f"{len(o)} offsets for {len(idx)} points")
+            pts.append((float(w), o))
+        pts.sort(key=lambda t: t[0])
+        k = np.array([w for w, _ in pts])
+        o = np.stack([x for _, x in pts])
+        if not np.isfinite(k).all() or (np.diff(k) <= 0).any():
+            raise ColliderError(f"{path}: in-between weights {sorted(k[1:-1].tolist())} (expected finite, distinct, "
+                                "neither 0 nor 1)")
+        if not np.isfinite(o).all():
+            raise ColliderError(f"{path}: an offset is not finite")
+        idx_all.append(idx)
+        knots.append(k)
+        offs.append(o)
+    return Shapes(names, idx_all, knots, offs, point_count)
 
 
 #: Faces per chunk: the second culling level under the part spheres.
@@ -382,10 +474,7 @@ def _read(path):
     if method not in schema.SKINNING_METHODS:
         raise ColliderError(f"{mesh.GetPath()}.{schema.SKINNING_METHOD_ATTR} is {method!r}: the runtime poses "
                             f"{' and '.join(schema.SKINNING_METHODS)} only")
-    blend = blend_shapes(mesh)
-    if blend:
-        raise ColliderError(f"{mesh.GetPath()} has UsdSkel blend shapes ({blend}); colossus skins without them, so "
-                            f"its shape would differ from UsdSkel's: not supported")
+    shapes = read_shapes(mesh, V)
 
     # -- parts
     where = f"{mesh.GetPath()}.{PARTS}"
@@ -425,7 +514,8 @@ def _read(path):
     chunk_vert_offsets, chunk_verts = _chunk_vertices(tris, faces, chunk_offsets)
     bounds = bound_data(pts, ji, jw, geom_bind, bind, part_joint, centers, radii, vert_offsets, verts)
 
-    clips = [read_clip(a, joint_index) for a in anims]
+    shape_index = {n: i for i, n in enumerate(shapes.names)}
+    clips = [read_clip(a, joint_index, shape_index) for a in anims]
     names = [c.name for c in clips]
     if len(set(names)) != len(names):
         raise ColliderError("duplicate clip names")
@@ -445,7 +535,7 @@ def _read(path):
         face_offsets=offs, faces=faces, vert_offsets=vert_offsets, verts=verts,
         face_part=face_part, chunk_offsets=chunk_offsets, part_chunks=part_chunks,
         chunk_vert_offsets=chunk_vert_offsets, chunk_verts=chunk_verts, faces_shared=bool(len(faces) > F),
-        bounds=bounds, clips=clips, static_local_to_world=l2w, skinning_method=method,
+        bounds=bounds, clips=clips, static_local_to_world=l2w, skinning_method=method, shapes=shapes,
         stage=stage if l2w is None else None,
     ), stage
 

@@ -74,6 +74,25 @@ def breakpoints(shapes: SK.Shapes, w0, w1) -> np.ndarray:
     return np.unique(np.clip(np.asarray(u), 0.0, 1.0))
 
 
+def breakpoint_weights(shapes: SK.Shapes, clip, a: float, b: float, wa, wb) -> np.ndarray:
+    """(q + 1, S) the weights at the breakpoints of ``[a, b]`` (item 2): the ends (``wa``, ``wb``
+    exactly), every ``blendShapeWeights`` sample time strictly inside (a foreign asset may sample
+    its weights at times its joints are not: UsdSkel's weights are linear only between their own
+    samples), and every knot crossing of the linear pieces between those."""
+    tw = np.asarray(getattr(clip, "tw", np.zeros(0)), dtype=np.float64)
+    inner = tw[(tw > a) & (tw < b)]
+    ts = np.r_[a, inner, b]
+    W = np.concatenate([np.asarray(wa, float)[None], clip.shape_weights(inner, len(shapes)),
+                        np.asarray(wb, float)[None]]) if len(inner) else np.stack([np.asarray(wa, float),
+                                                                                    np.asarray(wb, float)])
+    rows = [W[0]]
+    for k in range(len(ts) - 1):
+        u = breakpoints(shapes, W[k], W[k + 1])[1:-1]
+        rows += [W[k] + x * (W[k + 1] - W[k]) for x in u]
+        rows.append(W[k + 1])
+    return np.array(rows)
+
+
 def virtual_rig(rig: C.Rig, points) -> C.Rig:
     """The rig whose rest points are ``points`` (m, n, 3) (m copies of the vertex set: the virtual
     vertices of item 4), each copy with the vertex's influences and in the vertex's parts."""
@@ -122,7 +141,13 @@ def certificate(rig: C.Rig, clip, times, frame_bound, frame_ok, tol_abs: float, 
     if S == 0 or len(times) < 2:
         return base
     W = clip.shape_weights(times, S)
-    shaped = np.flatnonzero((W[:-1] != 0).any(1) | (W[1:] != 0).any(1))
+    live = (W[:-1] != 0).any(1) | (W[1:] != 0).any(1)
+    tw, vw = np.asarray(clip.tw, dtype=np.float64), np.asarray(clip.vw, dtype=np.float64)
+    if len(tw):  # a weight sample strictly inside an interval whose ends are at 0
+        k = np.searchsorted(times, tw[(vw != 0).any(1)], side="right") - 1
+        inside = (k >= 0) & (k < len(times) - 1)
+        live[k[inside]] |= ~np.isin(tw[(vw != 0).any(1)][inside], times)
+    shaped = np.flatnonzero(live)
     if not len(shaped):
         return base
     ok = np.asarray(frame_ok, dtype=bool)
@@ -178,9 +203,7 @@ def _interval(rig, clip, t0, t1, w0, w1, ok_ends, tol_abs, tol_rel, kw, rho):
     todo = [(t0, t1, np.asarray(w0, float), np.asarray(w1, float), 0, np.ones(P, bool))]
     while todo:
         a, b, wa, wb, depth, parts = todo.pop()
-        u = breakpoints(rig.shapes, wa, wb)
-        Wk = wa[None] + u[:, None] * (wb - wa)[None]  # the weights at the breakpoints (linear)
-        Wk[0], Wk[-1] = wa, wb  # the ends exactly: their virtual vertices are the real displaced points
+        Wk = breakpoint_weights(rig.shapes, clip, a, b, wa, wb)
         vr = virtual_rig(rig, SK.shape_points(rig.points, rig.shapes, Wk))
         t2 = np.array([a, b])
         skel = skel_at(rig, clip, t2)

@@ -116,6 +116,12 @@ class Pose:
         # local_to_world @ skinning_transforms (kernels.skin.fold); dual-quaternion meshes: the
         # wider layout of kernels.skin.fold_dq, which the one kernel's method switch reads
         self._dq = d.skinning_method == SK.DUAL_QUATERNION
+        # blend shapes (kernels.skin.shape_points, the one kernel's pre-pass): the rest points
+        # displaced at this pose's weights, what every skinning call below reads
+        self._S = 0 if d.shapes is None else len(d.shapes)
+        self.shape_weights = np.zeros(self._S)
+        self._rest_points = d.rest_points if self._S == 0 else d.rest_points.copy()
+        self._shaped = False  # a weight is not 0: tests K and D (rest points) do not bound it
         self._skin_world = np.empty((1, J, 1, SK.DQ_WIDTH)) if self._dq else np.empty((1, J, 12))
         self._lbs_world = np.empty((1, J, 12)) if self._dq else self._skin_world
         self.joint_world = np.empty((J, 4, 4))
@@ -153,18 +159,23 @@ class Pose:
         if trs is None:
             trs = self._trs[c.name] = np.empty((1, len(c.anim_to_skel), 10))
         PK._locals_at(self._time1, c.tt, c.vt, c.tr, c.vr, c.ts, c.vs, c.anim_to_skel, d.rest_local, self._local1, trs)
+        if self._S:
+            self._set_shapes(c.shape_weights(self._time1, self._S)[0])
         self._posed()
         self.refit[:] = False
         self.clip = c.name if clip is not None else None
         self.time = time
         return self
 
-    def set_joints(self, local, time: float = 0.0) -> "Pose":
+    def set_joints(self, local, time: float = 0.0, shape_weights=None) -> "Pose":
         """Re-pose in place at joint-local transforms ``local`` (J, 4, 4) column-vector, skeleton
-        joint order (validated by :meth:`Collider.pose_from_joints`); grow the spheres that do
-        not provably hold (see :attr:`refit`)."""
+        joint order, and blend-shape weights ``shape_weights`` (S,) (none: all 0) (validated by
+        :meth:`Collider.pose_from_joints`); grow the spheres that do not provably hold (see
+        :attr:`refit`)."""
         self._set_world(float(time))
         self._local[:] = local
+        if self._S:
+            self._set_shapes(np.zeros(self._S) if shape_weights is None else shape_weights)
         self._posed()
         st = self.skinning_transforms
         if not (np.isfinite(st).all() and np.abs(st).max(initial=0.0) <= LARGEST_TRANSFORM):
@@ -174,6 +185,16 @@ class Pose:
         self.clip = None
         self.time = float(time)
         return self
+
+    def _set_shapes(self, w):
+        """The rest points displaced by the blend shapes at weights ``w`` (S,)."""
+        d = self._data
+        self.shape_weights[:] = w
+        self._shaped = bool(np.any(self.shape_weights != 0.0))
+        if self._shaped:
+            self._rest_points[:] = SK.shape_points(d.rest_points, d.shapes, self.shape_weights[None])[0]
+        else:
+            self._rest_points[:] = d.rest_points
 
     def _set_world(self, time):
         d = self._data
@@ -215,13 +236,13 @@ class Pose:
         self._bounded = self._version
         d = self._data
         B._pose_bounds_serial(self._world1, *d.bounds.args(), self._sph, self._kb, self._db)
-        if self._dq:  # tests K and D bound linear blends only: a dual-quaternion part is skinned
-            self._kb[:] = np.inf
+        if self._dq or self._shaped:  # tests K and D bound linear blends of the rest points only: a
+            self._kb[:] = np.inf       # dual-quaternion part, or one under blend shapes, is skinned
             self._db[:] = np.inf
         B._cull_spheres(self._sph, self._kb, self._db, self._spheres, self._cull)
-        if not self.collider.lazy or self._dq:
+        if not self.collider.lazy or self._dq or self._shaped:
             self._skin_all()
-            d_, _ = SK.part_farthest(d.rest_points, d.joint_indices, d.joint_weights, self._skin_world,
+            d_, _ = SK.part_farthest(self._rest_points, d.joint_indices, d.joint_weights, self._skin_world,
                                      d.vert_offsets, d.verts, self.spheres[None, :, :3])
             far = d_[0] * (1.0 + 1e-6) + 1e-9
             self.cull[:, 3] = np.maximum(self.spheres[:, 3], far)
@@ -239,7 +260,7 @@ class Pose:
         s[grow, 3] = bound[grow]
         if loose.any():
             d = self._data
-            far, _ = SK.part_farthest(d.rest_points, d.joint_indices, d.joint_weights, self._skin_world,
+            far, _ = SK.part_farthest(self._rest_points, d.joint_indices, d.joint_weights, self._skin_world,
                                       d.vert_offsets, d.verts, s[None, :, :3], todo=loose[None])
             stored = self._sph[0, :, 3]
             held = loose & (far[0] <= stored)  # the bounds were too loose: the stored sphere does hold
@@ -343,12 +364,12 @@ class Pose:
         if self._full != self._version:
             d = self._data
             kern = SK._skin_frames if len(d.rest_points) > PARALLEL_SKIN else SK._skin_frames_serial
-            kern(d.rest_points, d.joint_indices, d.joint_weights, self._skin_world, self._points1)
+            kern(self._rest_points, d.joint_indices, d.joint_weights, self._skin_world, self._points1)
             self._full = self._version
 
     def _lazy(self):
         d = self._data
-        return (self._full, d.rest_points, d.joint_indices, d.joint_weights,
+        return (self._full, self._rest_points, d.joint_indices, d.joint_weights,
                 self._skin_world, d.vert_offsets, d.verts, d.chunk_vert_offsets, d.chunk_verts)
 
     def _all_chunks(self):
@@ -434,7 +455,7 @@ class Collider:
         return self.data.rest_local.copy()
 
     def pose_from_joints(self, local=None, *, translations=None, rotations=None, scales=None,
-                         time: float = 0.0, out: Pose | None = None) -> Pose:
+                         shape_weights=None, time: float = 0.0, out: Pose | None = None) -> Pose:
         """The collider at any pose (IK, ragdoll, procedural), with spheres that hold for it.
 
         Parameters
@@ -446,6 +467,10 @@ class Collider:
         translations : (J, 3), rotations : (J, 4) ``(x, y, z, w)``, scales : (J, 3), optional
             ``local = T R S`` (UsdSkel's composition); translations default to the rest pose's,
             scales to 1; rotations are required and normalised.
+        shape_weights : (S,) float64 or dict, optional
+            Blend-shape weights in the mesh's shape order (:attr:`shapes`), or ``{name: weight}``
+            (shapes not named are 0); default: every shape at 0.  Applied before skinning, as
+            UsdSkel does.
         time : float
             Time code for an animated skeleton transform (only then does it matter).
         out : Pose, optional  reuse its buffers
@@ -485,10 +510,37 @@ class Collider:
             if not np.allclose(local[:, 3], [0, 0, 0, 1], atol=1e-9):
                 raise ValueError("pose_from_joints: local transforms must be affine column-vector matrices "
                                  "(last row 0 0 0 1); a row-vector (USD layout) matrix must be transposed")
+        sw = self._shape_weight_vector(shape_weights)
         p = out if out is not None else Pose(self)
         if p.collider is not self:
             raise ValueError("out is a pose of another collider")
-        return p.set_joints(local, time)
+        return p.set_joints(local, time, sw)
+
+    @property
+    def shapes(self) -> list:
+        """The mesh's blend-shape names, in the order of :meth:`pose_from_joints`'s weights."""
+        return [] if self.data.shapes is None else list(self.data.shapes.names)
+
+    def _shape_weight_vector(self, shape_weights):
+        names = self.shapes
+        if shape_weights is None:
+            return None
+        if isinstance(shape_weights, dict):
+            idx = {n: i for i, n in enumerate(names)}
+            unknown = [k for k in shape_weights if k not in idx]
+            if unknown:
+                raise ValueError(f"pose_from_joints: {unknown[0]!r} is not a blend shape of this collider "
+                                 f"({len(names)} shapes)")
+            w = np.zeros(len(names))
+            for k, v in shape_weights.items():
+                w[idx[k]] = float(v)
+        else:
+            w = np.asarray(shape_weights, dtype=np.float64).reshape(-1)
+            if w.shape != (len(names),):
+                raise ValueError(f"pose_from_joints: shape_weights must be ({len(names)},), got {w.shape}")
+        if not np.isfinite(w).all():
+            raise ValueError("pose_from_joints: shape_weights must be finite")
+        return w
 
     def frame_times(self, clip: str) -> np.ndarray:
         """(n,) float64 time codes of the clip's samples (its frames)."""

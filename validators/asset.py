@@ -502,8 +502,8 @@ class LoadedAsset:
             ok, why = self.ready(need)
             if not ok:
                 return ok, why
-        if self.blend_shapes:
-            return False, f"the mesh has UsdSkel blend shapes ({self.blend_shapes}), which the proof does not model"
+        if self.shapes_error:
+            return False, f"the mesh's blend shapes cannot be posed ({self.shapes_error}) (COL313)"
         if self.skinning_method not in schema.SKINNING_METHODS:
             return False, f"the mesh's skinning method {self.skinning_method!r} is not one the runtime poses (COL312)"
         try:
@@ -522,12 +522,43 @@ class LoadedAsset:
         """What UsdSkel blend shapes the mesh binds ("" for none): :func:`runtime.asset.blend_shapes`."""
         return runtime_asset.blend_shapes(self.mesh) if self.mesh is not None else ""
 
+    @cached_property
+    def _shapes_read(self):
+        if self.mesh is None or not self.blend_shapes:
+            return None, ""
+        try:
+            return runtime_asset.read_shapes(self.mesh, len(self.points)), ""
+        except ColliderError as e:
+            return None, str(e)
+        except Exception as e:  # pxr raises Tf errors of its own types
+            return None, " ".join(str(e).split())[:200] or type(e).__name__
+
+    @property
+    def shapes(self):
+        """The mesh's blend shapes (:class:`runtime.kernels.skin.Shapes`) or None (none, or
+        unreadable: :attr:`shapes_error`)."""
+        return self._shapes_read[0]
+
+    @property
+    def shapes_error(self) -> str:
+        """Why the mesh's blend shapes cannot be posed as written ("" when they can or it has none)."""
+        return self._shapes_read[1]
+
+    def shape_weights(self, clip: Clip, times) -> np.ndarray | None:
+        """(T, S) blend-shape weights of ``clip`` at ``times`` as UsdSkel interpolates them, or None
+        when the mesh has no shapes."""
+        if self.shapes is None or not len(self.shapes):
+            return None
+        return self.clip_data(clip).shape_weights(times, len(self.shapes))
+
     def clip_data(self, clip: Clip):
         """The clip's raw samples as :class:`runtime.schema.Clip` (what UsdSkel interpolates
         between frames); raises :class:`runtime.errors.ColliderError` when they are malformed."""
         cache = self.__dict__.setdefault("_clip_data", {})
         if clip.name not in cache:
-            cache[clip.name] = runtime_asset.read_clip(clip.prim, self.joint_index)
+            shapes = self.shapes
+            index = {n: i for i, n in enumerate(shapes.names)} if shapes is not None else None
+            cache[clip.name] = runtime_asset.read_clip(clip.prim, self.joint_index, index)
         return cache[clip.name]
 
     @cached_property
@@ -544,4 +575,4 @@ class LoadedAsset:
         poff, pverts = self.part_vertices
         return Rig(self.points, self.jidx, self.jw, self.geom_bind, self.bind, self.rest, self.parents,
                    self.part_joint_ids, self.part_centers, self.part_radii, poff, pverts, self.skel_world,
-                   skinning_method=self.skinning_method)
+                   skinning_method=self.skinning_method, shapes=self.shapes)

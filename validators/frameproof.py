@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from colossus.runtime import certify as C
-from colossus.runtime.certify_dq import certificate  # the skinning method's continuous certificate
+from colossus.runtime.certify_shapes import certificate  # the skinning method's continuous certificate, with shapes
 from colossus.runtime.kernels.skin import part_farthest, skin_frames  # noqa: F401  (the one skinning kernel)
 
 from . import tolerances as tol
@@ -219,7 +219,7 @@ def prove(asset, subframes: int = 0, chunk_frames: int | None = None, clips=None
         for lo in range(0, len(times), chunk):
             t = times[lo:lo + chunk]
             skel = asset.skel_transforms(asset.anim_local(clip, t))
-            s = C.sampled(rig, skel, tolerance, tol.CONTAIN_RADIUS)
+            s = C.sampled(rig, skel, tolerance, tol.CONTAIN_RADIUS, shape_weights=asset.shape_weights(clip, t))
             for k, name in enumerate(TIER_NAMES):
                 proof.tiers[name] += int((s.tier == k).sum())
             exact = s.tier == 2
@@ -318,7 +318,8 @@ def tightest(asset, proof: Proof, slack_ratio: float) -> np.ndarray:
             times = clip_times(clip.times, proof.subframes)[0]
             for lo in range(0, len(times), tol.CHUNK_FRAMES):
                 skel = asset.skel_transforms(asset.anim_local(clip, times[lo:lo + tol.CHUNK_FRAMES]))
-                s = C.sampled(rig, skel, 0.0, 0.0, exact=np.broadcast_to(exact, (len(skel), len(r))))
+                s = C.sampled(rig, skel, 0.0, 0.0, exact=np.broadcast_to(exact, (len(skel), len(r))),
+                              shape_weights=asset.shape_weights(clip, times[lo:lo + tol.CHUNK_FRAMES]))
                 with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
                     scale = s.spheres[..., 3] / np.where(r > 0, r, 1.0)[None]
                     out[need] = np.maximum(out[need], np.max(s.dist[:, need] / scale[:, need], axis=0))

@@ -298,7 +298,8 @@ def _read_usd(path, meshes=None, fps=None):
         skin = Skin(joint_node[si], np.linalg.inv(skel_bind[si]), [j.split("/")[-1] for j in joints],
                     np.repeat(np.arange(nv), k)[live], ji[live], jw[live])
         scene_meshes.append(SceneMesh(name=prim.GetName(), node=skel_node[si], positions=p, triangles=tri,
-                                      to_world=skel_w0[si], skin=skin, morph_targets=len(blend or [])))
+                                      to_world=skel_w0[si], skin=skin, morph_targets=len(blend or []),
+                                      shapes=_blend_shapes(path, prim, nv, g)))
 
     # ---- clips ----------------------------------------------------------------------------------
     def channels_of(anim_prim, si):
@@ -374,7 +375,7 @@ def _read_usd(path, meshes=None, fps=None):
         for si, prim in bound:
             chans += channels_of(prim, si)
             used.add(str(prim.GetPath()))
-        anims.append(Animation(bound[0][1].GetName(), chans))
+        anims.append(Animation(bound[0][1].GetName(), chans, weights=_weight_channels(bound[0][1], targets, tcps)))
     for prim in stage.Traverse():
         if not prim.IsA(UsdSkel.Animation) or str(prim.GetPath()) in used:
             continue
@@ -385,12 +386,12 @@ def _read_usd(path, meshes=None, fps=None):
             si = max(range(len(skels)), key=lambda i: len(aj & set(skel_joints[i])))
             if not aj & set(skel_joints[si]):
                 continue  # an animation of another skeleton
-        anims.append(Animation(prim.GetName(), channels_of(prim, si)))
+        anims.append(Animation(prim.GetName(), channels_of(prim, si), weights=_weight_channels(prim, targets, tcps)))
     for a in anims:
         if a.channels:
             for si in range(len(skels)):
                 a.channels += skel_motion(si, None)
-    anims = [a for a in anims if any(len(c.times) and not c.static for c in a.channels)]
+    anims = [a for a in anims if any(len(c.times) and not c.static for c in a.channels + a.weights)]
     scene = Scene(names=names, parents=parents, local=local, meshes=scene_meshes, animations=anims,
                   fps_hint=tcps, sampling_note="UsdSkel time samples, lerp / slerp between")
     notes = []
@@ -411,6 +412,65 @@ def _read_usd(path, meshes=None, fps=None):
                                     "nothing of them to carry")
     mesh.source["not_carried"] = items
     return mesh.replace(up_axis=up, meters_per_unit=mpu)
+
+
+def _blend_shapes(path, prim, nv, g):
+    """The mesh prim's UsdSkel blend shapes as :class:`model.BlendShape` (mesh space: the scene
+    builder moves them with the points), read by the runtime's own reader
+    (:func:`runtime.asset.read_shapes`: what it refuses, the import refuses).  ``g`` is the
+    geomBindTransform already applied to the points: offsets in mesh space go through its linear
+    part here (the scene mesh's points are in skeleton space)."""
+    from colossus.runtime.asset import read_shapes
+    from colossus.runtime.errors import ColliderError
+
+    from ..model import BlendShape
+
+    try:
+        sh = read_shapes(prim, nv)
+    except ColliderError as e:
+        raise InputError(path, f"blend shapes: {e}") from None
+    out = []
+    A = np.asarray(g, dtype=np.float64)[:3, :3]
+    for s, name in enumerate(sh.names):
+        k, o = sh.knots[s], sh.knot_offsets[s] @ A.T
+        one = int(np.flatnonzero(k == 1.0)[0])
+        out.append(BlendShape(name, sh.indices[s], o[one],
+                              tuple((float(k[j]), o[j]) for j in range(len(k)) if k[j] not in (0.0, 1.0))))
+    return out
+
+
+def _weight_channels(anim_prim, targets, tcps):
+    """The SkelAnimation's ``blendShapeWeights`` as one weight :class:`Channel` per scene mesh
+    (``node`` = the mesh's index in ``targets``, columns in the mesh's ``skel:blendShapes`` order;
+    UsdSkel maps them by name, a shape the animation does not name is 0), linear between samples
+    as UsdSkel interpolates them."""
+    from pxr import UsdSkel
+
+    a = UsdSkel.Animation(anim_prim)
+    names = [str(n) for n in (a.GetBlendShapesAttr().Get() or [])] if a.GetBlendShapesAttr() else []
+    attr = a.GetBlendShapeWeightsAttr()
+    if not names or not attr or not attr.HasAuthoredValue():
+        return []
+    times = list(attr.GetTimeSamples())
+    static = not times
+    raw = [attr.Get(t) for t in times] if times else [attr.Get()]
+    times = times or [0.0]
+    if any(v is None or len(v) != len(names) for v in raw):
+        raise InputError(anim_prim.GetStage().GetRootLayer().identifier,
+                         f"animation {anim_prim.GetPath()}: blendShapeWeights do not have one weight per blendShapes name")
+    vals = np.array([np.asarray(v, dtype=np.float64) for v in raw]).reshape(len(times), len(names))
+    col = {n: c for c, n in enumerate(names)}
+    out = []
+    for i, (_, q) in enumerate(targets):
+        mesh_names = [str(n) for n in (UsdSkel.BindingAPI(q.GetPrim()).GetBlendShapesAttr().Get() or [])]
+        if not mesh_names or not any(n in col for n in mesh_names):
+            continue
+        v = np.zeros((len(times), len(mesh_names)))
+        for s, n in enumerate(mesh_names):
+            if n in col:
+                v[:, s] = vals[:, col[n]]
+        out.append(Channel(i, "w", np.asarray(times, dtype=np.float64) / tcps, v, static=static))
+    return out
 
 
 #: Most time codes at which dual-quaternion and linear skinning are compared for a bound.

@@ -41,8 +41,11 @@ def bake(mesh: SkinnedMesh, up_axis: str = "Y", meters_per_unit: float = 1.0):
         return m
 
     positions = apply_points(c @ mesh.geom_bind, mesh.positions).astype(np.float32)
-    clips = tuple(Clip(cl.name, cl.times, front(cl.local)) for cl in mesh.clips)
+    clips = tuple(Clip(cl.name, cl.times, front(cl.local), cl.shape_weights) for cl in mesh.clips)
+    from ..model import transform_shapes
+
     out = mesh.replace(
+        blend_shapes=transform_shapes(mesh.blend_shapes, (c @ mesh.geom_bind)[:3, :3]),
         positions=positions, geom_bind=np.eye(4), bind_transforms=affine(c @ mesh.bind_transforms),
         rest_transforms=front(mesh.rest_transforms), clips=clips, up_axis=up_axis,
         meters_per_unit=float(meters_per_unit),

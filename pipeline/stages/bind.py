@@ -161,7 +161,7 @@ def bind(mesh: SkinnedMesh, max_influences: int = 4, unweighted: str = "error"):
     # -- strongest first, drop negligible and excess, renormalise -------------------------
     out_j, out_w, over, negligible, dropped_weight = limit_influences(ji, jw / total[:, None], max_influences)
 
-    clips = tuple(Clip(c.name, c.times, c.local[:, order]) for c in mesh.clips)
+    clips = tuple(Clip(c.name, c.times, c.local[:, order], c.shape_weights) for c in mesh.clips)
     out = mesh.replace(
         joint_indices=out_j, joint_weights=out_w.astype(np.float32),
         joint_names=tuple(mesh.joint_names[i] for i in order), parents=parents,

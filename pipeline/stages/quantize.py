@@ -243,8 +243,10 @@ def quantize(mesh: SkinnedMesh):
     clips, stored, bounds = [], [], {}
     for c in mesh.clips:
         t, q, s, norms = _store_clip(c.local, mesh.parents, centers)
-        clips.append(type(c)(c.name, c.times, compose_trs(t, q, s)))
-        stored.append(Clip.on_grid(c.name, c.times, *_as_stored(t, q, s)))
+        # blend-shape weights are stored as float32 (UsdSkel's blendShapeWeights): rounded here
+        w = c.shape_weights.astype(np.float32).astype(np.float64)
+        clips.append(type(c)(c.name, c.times, compose_trs(t, q, s), w))
+        stored.append(Clip.on_grid(c.name, c.times, *_as_stored(t, q, s), weights=w))
         bounds[c.name] = (_storage_bound(norms, mesh.joint_indices, mesh.joint_weights, dist)
                           / _posed_size(mesh, c.local[0]))
     info = [dict(i, storage_error_relative=bounds[i["name"]]) if i.get("name") in bounds else i

@@ -84,6 +84,12 @@ def simplify(mesh: SkinnedMesh, target_faces: int | None = None, max_deviation=N
         raise ValueError("simplify: expected target_faces or max_deviation, got neither")
     if target_faces is not None and int(target_faces) < 4:
         raise ValueError(f"simplify target_faces: expected >= 4, got {target_faces}")
+    if mesh.blend_shapes:  # the proxy's offsets and its deviation bound under shapes: not built yet
+        from ..errors import InputError
+        raise InputError(mesh.source.get("path") or mesh.source.get("file") or "mesh",
+                         f"simplify: the mesh has {len(mesh.blend_shapes)} blend shapes, and the proxy does not carry "
+                         "them yet (its deviation bound would not cover them); import without --target-faces / "
+                         "--max-deviation")
     spec = parse_max_deviation(max_deviation)
     t_start = time.perf_counter()
     n, m = mesh.vertex_count, mesh.face_count

@@ -43,10 +43,10 @@ from __future__ import annotations
 import numpy as np
 
 from colossus.pipeline.geometry.minsphere import largest_min_sphere, min_sphere
-from colossus.pipeline.model import SkinnedMesh, Parts, skel_transforms
+from colossus.pipeline.model import SkinnedMesh, Parts, kernel_shapes, skel_transforms
 from colossus.pipeline.stages import StageReport
 from colossus.pipeline.tolerances import SPHERE_PAD_RADIUS, SPHERE_PAD_RELATIVE, model_scale
-from colossus.runtime import certify, certify_dq
+from colossus.runtime import certify, certify_shapes
 from colossus.runtime.kernels import skin as SK
 from colossus.runtime.schema import part_vertex_csr
 
@@ -137,6 +137,9 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     pos_all, ji_all, jw_all = SK.check_skin_inputs(mesh.positions, mesh.joint_indices, mesh.joint_weights,
                                                    mesh.joint_count)
 
+    if mesh.blend_shapes:  # every pose's points displaced by its shape weights (the bind pose: none)
+        W = np.concatenate([np.zeros((1, len(mesh.blend_shapes)))] + [c.shape_weights for c in mesh.clips])
+        pos_all = SK.shape_points(mesh.positions, kernel_shapes(mesh.blend_shapes, mesh.vertex_count), W)
     slack_idx = slack_pose_indices(mesh)
     P = len(parts_in)
     centers = np.zeros((P, 3), np.float32)
@@ -146,7 +149,7 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     for p in range(P):
         j = int(parts_in.joints[p])
         verts = np.unique(mesh.triangles[parts_in.part_faces(p)].ravel())
-        pos, ji, jw = pos_all[verts], ji_all[verts], jw_all[verts]
+        pos, ji, jw = pos_all[..., verts, :], ji_all[verts], jw_all[verts]
         mats = (SK.fold(inv_S[:, j, None] @ to_skel) if mesh.skinning_method == SK.CLASSIC_LINEAR else
                 SK.fold_method(mesh.skinning_method, skin_skel, G, world=inv_S[:, j]))
         pts = SK.skin_frames(pos, ji, jw, mats, dtype=np.float64)  # (F, nv, 3) joint space
@@ -207,7 +210,8 @@ def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
     # the rig exactly as the writer lays it out (the roots' scale folded by quantize)
     rig = certify.Rig(mesh.positions, mesh.joint_indices, mesh.joint_weights, mesh.geom_bind,
                       mesh.bind_transforms, mesh.rest_transforms, mesh.parents, np.asarray(parts_in.joints),
-                      centers.astype(np.float64), target, voff, verts, skinning_method=mesh.skinning_method)
+                      centers.astype(np.float64), target, voff, verts, skinning_method=mesh.skinning_method,
+                      shapes=kernel_shapes(mesh.blend_shapes, mesh.vertex_count) if mesh.blend_shapes else None)
     start = 1  # pose 0 is the bind pose
     for clip, stored in zip(mesh.clips, mesh.stored_clips, strict=True):
         n = clip.frame_count
@@ -215,7 +219,7 @@ def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
         start += n
         if n < 2:
             continue
-        c = certify_dq.certificate(rig, stored, clip.times, far,
+        c = certify_shapes.certificate(rig, stored, clip.times, far,
                                np.ones_like(far, bool), 0.0, 0.0, rho=target, growth=True,
                                max_depth=GROWTH_DEPTH, frame_bound_space="joint")
         # a J-space bound U certifies a radius r where U <= r * ratio (non-uniform scales on the

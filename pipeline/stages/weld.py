@@ -240,6 +240,9 @@ def weld(mesh: SkinnedMesh, tolerance: float | None = None) -> tuple[SkinnedMesh
         tolerance = WELD_RELATIVE * model_scale(mesh.positions)
     keep, inverse, conflicts = weld_maps(mesh.positions, mesh.joint_indices, mesh.joint_weights, tolerance,
                                          mesh.triangles)
+    shape_split = 0
+    if mesh.blend_shapes:  # two vertices merge only if every shape moves them alike too
+        keep, inverse, shape_split = _split_by_shapes(keep, inverse, mesh.blend_shapes, mesh.vertex_count)
     tris = inverse[mesh.triangles]
     degenerate = (tris[:, 0] == tris[:, 1]) | (tris[:, 1] == tris[:, 2]) | (tris[:, 0] == tris[:, 2])
     kept_faces = ~degenerate
@@ -249,6 +252,9 @@ def weld(mesh: SkinnedMesh, tolerance: float | None = None) -> tuple[SkinnedMesh
         joint_indices=mesh.joint_indices[keep],
         joint_weights=mesh.joint_weights[keep],
     )
+    if mesh.blend_shapes:
+        from ..model import remap_shapes
+        changes["blend_shapes"] = remap_shapes(mesh.blend_shapes, inverse, len(keep))
     if mesh.parts is not None:
         changes["parts"] = _drop_faces(mesh.parts, kept_faces)
     out = mesh.replace(**changes)
@@ -262,12 +268,33 @@ def weld(mesh: SkinnedMesh, tolerance: float | None = None) -> tuple[SkinnedMesh
         "degenerate_faces_removed": int(degenerate.sum()),
         "faces_out": int(kept_faces.sum()),
         "tolerance": float(tolerance),
+        "kept_apart_by_shapes": int(shape_split),
     }
     if conflicts:
         report.warnings.append(
             f"{conflicts} same-position vertices have different skin weights and were kept apart "
             "(they would tear open in animation)")
     return out, report
+
+
+def _split_by_shapes(keep, inverse, shapes, n):
+    """The weld's classes split where their vertices' blend-shape offsets differ
+    (:func:`model.shape_table`, exact float32 equality): ``(keep, inverse, extra classes)``; the
+    classes stay in the order of their first vertex."""
+    from ..model import shape_table
+
+    table = shape_table(shapes, n)
+    _, row = np.unique(table, axis=0, return_inverse=True)
+    key = np.asarray(inverse, dtype=np.int64) * (int(row.max()) + 1) + row.reshape(-1)
+    _, first, inv = np.unique(key, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    new_inverse = rank[inv.reshape(-1)]
+    new_keep = first[order]
+    if len(new_keep) == len(keep):  # nothing split: the weld's own choice of vertex stands
+        return keep, inverse, 0
+    return new_keep, new_inverse, len(new_keep) - len(keep)
 
 
 def _drop_faces(parts: Parts, kept_faces: np.ndarray) -> Parts:

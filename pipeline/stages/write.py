@@ -143,6 +143,7 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None, check=Non
 
         # -- clips ---------------------------------------------------------------------------
         taken = set(RESERVED)
+        shape_names = _shape_names(mesh)
         clip_paths = []
         sampled = {c["name"]: c for c in mesh.source.get("clip_info", [])}
         for clip, stored in zip(mesh.clips, mesh.stored_clips, strict=True):
@@ -161,6 +162,7 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None, check=Non
                 ta.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(t[f], dtype=np.float32)), tc)
                 ra.Set(Vt.QuatfArray.FromNumpy(qxyzw[f]), tc)
                 sa.Set(Vt.Vec3hArray.FromNumpy(np.ascontiguousarray(s[f], dtype=np.float16)), tc)
+            _write_shape_weights(anim, clip, stored, shape_names)
             clip_paths.append(anim.GetPath())
         if clip_paths:
             UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([clip_paths[0]])
@@ -185,6 +187,7 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None, check=Non
             binding.CreateSkinningMethodAttr().Set(mesh.skinning_method)
         if not np.allclose(mesh.geom_bind, np.eye(4), rtol=0, atol=1e-12):
             binding.CreateGeomBindTransformAttr(schema.matrices_to_usd(mesh.geom_bind))
+        _write_blend_shapes(stage, geo, mesh, shape_names)
         UsdPhysics.CollisionAPI.Apply(geo.GetPrim())
         UsdPhysics.MeshCollisionAPI.Apply(geo.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.none)
 
@@ -217,10 +220,56 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None, check=Non
         raise
     size = os.path.getsize(out)
     counts = {"path": out, "bytes": size, "clips": len(mesh.clips), "joints": mesh.joint_count, "parts": len(parts),
-              "skinning_method": mesh.skinning_method}
+              "skinning_method": mesh.skinning_method, "blend_shapes": len(mesh.blend_shapes)}
     if checked is not None:
         counts["check_seconds"] = checked
     return mesh, StageReport("write", counts=counts)
+
+
+def _shape_names(mesh: SkinnedMesh) -> list:
+    """The blend shapes' prim names under the collision mesh, also their ``skel:blendShapes``
+    tokens and the clips' ``blendShapes`` (valid identifiers, unique)."""
+    taken = set()
+    return [_ident(s.name, taken) for s in mesh.blend_shapes]
+
+
+def _write_blend_shapes(stage, geo, mesh: SkinnedMesh, names) -> None:
+    """One ``UsdSkel.BlendShape`` per shape under the collision mesh (``offsets``,
+    ``pointIndices``, ``inbetweens:*`` with their weights), named by ``skel:blendShapes`` and
+    targeted by ``skel:blendShapeTargets`` in that order (shared/CONTRACT.md)."""
+    from pxr import Vt, UsdSkel
+
+    if not mesh.blend_shapes:
+        return
+    binding = UsdSkel.BindingAPI(geo.GetPrim())
+    paths = []
+    for shape, name in zip(mesh.blend_shapes, names, strict=True):
+        bs = UsdSkel.BlendShape.Define(stage, geo.GetPath().AppendChild(name))
+        bs.CreateOffsetsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(shape.offsets, dtype=np.float32)))
+        bs.CreatePointIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(shape.indices, dtype=np.int32)))
+        for k, (w, off) in enumerate(shape.inbetweens):
+            ib = bs.CreateInbetween(f"inbetween{k}")
+            ib.SetWeight(float(w))
+            ib.SetOffsets(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(off, dtype=np.float32)))
+        if name != shape.name:
+            bs.GetPrim().SetCustomDataByKey(schema.SHAPE_NAME_KEY, shape.name)
+        paths.append(bs.GetPath())
+    binding.CreateBlendShapesAttr(Vt.TokenArray(list(names)))
+    binding.CreateBlendShapeTargetsRel().SetTargets(paths)
+
+
+def _write_shape_weights(anim, clip, stored, names) -> None:
+    """The clip's blend-shape weights in its SkelAnimation (``blendShapes``,
+    ``blendShapeWeights``, one float32 sample per frame: the values ``quantize`` stored)."""
+    from pxr import Usd, Vt
+
+    if not names:
+        return
+    w = stored.shape_weights(clip.times, len(names))
+    anim.CreateBlendShapesAttr(Vt.TokenArray(list(names)))
+    attr = anim.CreateBlendShapeWeightsAttr()
+    for f, code in enumerate(clip.times):
+        attr.Set(Vt.FloatArray.FromNumpy(np.ascontiguousarray(w[f], dtype=np.float32)), Usd.TimeCode(float(code)))
 
 
 def _clip_source(info: dict, mesh: SkinnedMesh) -> dict:

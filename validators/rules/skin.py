@@ -157,16 +157,14 @@ def weights_sorted(asset, ctx):
 
 
 @rule("COL311", "no-blend-shapes", "error",
-      "The collision mesh binds no UsdSkel blend shapes (the proof and the runtime skin without them).",
-      needs=("mesh_raw",))
+      "Retired: blend shapes are carried, posed and proven (COL313, COL314 check them).",
+      needs=("mesh_raw",), removed=True)
 def no_blend_shapes(asset, ctx):
-    """What: the mesh has no `skel:blendShapes` attribute values and no `skel:blendShapeTargets`.
-    Why: blend shapes move vertices before skinning; the frame proof, the continuous certificate
-    and the runtime model linear blend skinning only, so their spheres and points would not be
-    those UsdSkel shows.  The asset is refused rather than proved wrong.
+    """What: (retired) the mesh bound no UsdSkel blend shapes.
+    Why: the runtime, the frame proof and the continuous certificate now apply blend shapes before
+    skinning exactly as UsdSkel does (runtime.certify_shapes); the code stays reserved.
     Example: a face mesh with `skel:blendShapes = ["smile"]` bound to `/Rig/Shapes/smile`."""
-    if asset.blend_shapes:
-        yield hit(f"the mesh has UsdSkel blend shapes: {asset.blend_shapes}", prim=str(asset.mesh.GetPath()))
+    return iter(())
 
 
 @rule("COL312", "skinning-method", "error",
@@ -187,3 +185,53 @@ def skinning_method(asset, ctx):
     if m not in schema.SKINNING_METHODS:
         yield hit(f"primvars:skel:skinningMethod is {m!r}: the runtime poses {' and '.join(schema.SKINNING_METHODS)} "
                   "only (nothing is proven for this mesh)", prim=str(asset.mesh.GetPath()))
+
+
+@rule("COL313", "blend-shapes-valid", "error",
+      "The collision mesh's UsdSkel blend shapes are well formed and finite (names, targets, offsets, "
+      "point indices, in-betweens).", needs=("mesh_raw",))
+def blend_shapes_valid(asset, ctx):
+    """What: `skel:blendShapes` and `skel:blendShapeTargets` name the same number of distinct
+    shapes, each target a `BlendShape` prim whose `offsets` are finite and one per point index
+    (every point when it has no `pointIndices`), its indices distinct and in range, its
+    in-betweens at finite weights other than 0 and 1, no two at one weight, with as many finite
+    offsets.
+    Why: the runtime and the proof apply the shapes before skinning as UsdSkel does; a shape they
+    cannot apply as written (NaN offsets, counts that differ, which usd-core skips with a warning)
+    would leave the posed surface and the proof's to disagree, so the proof is not run.
+    Example: `offsets = [(nan, 0, 0)]` on `/Root/Collider/smile`."""
+    if asset.shapes_error:
+        yield hit(f"blend shapes cannot be posed: {asset.shapes_error}", prim=str(asset.mesh.GetPath()))
+
+
+@rule("COL314", "blend-shape-weights", "error",
+      "Each clip's blend-shape weights are finite, one per name of its blendShapes.", needs=("clips",))
+def blend_shape_weights(asset, ctx):
+    """What: in every SkelAnimation, `blendShapeWeights` has one finite weight per `blendShapes`
+    name at every time sample.
+    Why: the proof holds for any finite weights, linearly interpolated between their samples
+    (UsdSkel's interpolation, extrapolated in-betweens included: runtime.certify_shapes); a NaN or
+    infinite weight, or a count that differs from the names, is outside what it assumes, and the
+    runtime refuses the clip.
+    Example: `float[] blendShapeWeights.timeSamples = {0: [nan]}`."""
+    from pxr import UsdSkel
+
+    for c in asset.clips:
+        a = UsdSkel.Animation(c.prim)
+        names = list(a.GetBlendShapesAttr().Get() or []) if a.GetBlendShapesAttr() else []
+        attr = a.GetBlendShapeWeightsAttr()
+        if not attr or not attr.HasAuthoredValue():
+            continue
+        times = list(attr.GetTimeSamples()) or [None]
+        for t in times:
+            v = attr.Get() if t is None else attr.Get(t)
+            w = np.asarray(v if v is not None else [], dtype=np.float64)
+            where = "its default" if t is None else f"time {t:g}"
+            if len(w) != len(names):
+                yield hit(f"clip {c.name!r}: blendShapeWeights at {where} has {len(w)} weights for {len(names)} "
+                          "blendShapes names", prim=str(c.prim.GetPath()))
+                break
+            if not np.isfinite(w).all():
+                yield hit(f"clip {c.name!r}: blendShapeWeights at {where} has a weight that is not finite "
+                          f"({names[int(np.flatnonzero(~np.isfinite(w))[0])]!r})", prim=str(c.prim.GetPath()))
+                break

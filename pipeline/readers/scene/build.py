@@ -63,11 +63,12 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
     chosen = _choose_meshes(all_meshes, skinned, under_bone, meshes, path, notes)
     skel, unweighted = _joints(scene, all_meshes, chosen, parents, animated, bone_nodes, notes)
     bind, rest = _bind_transforms(all_meshes, chosen, skel, parents, nworld, path)
-    positions, triangles, ji, jw, mesh_info, weights_normalised = _geometry(
+    positions, triangles, ji, jw, mesh_info, weights_normalised, shapes, shape_of = _geometry(
         all_meshes, chosen, names, skel, unweighted, parents, nworld, bind, budget, notes)
-    clips, clip_info, rate = _clips(scene, path, fps, budget, skel, parents, rest, bind, positions, ji, jw)
+    clips, clip_info, rate = _clips(scene, path, fps, budget, skel, parents, rest, bind, positions, ji, jw,
+                                    shape_of, len(shapes))
     return _skinned_mesh(scene, source, all_meshes, chosen, skel, bind, rest, positions, triangles, ji, jw,
-                         mesh_info, weights_normalised, clips, clip_info, rate, notes)
+                         mesh_info, weights_normalised, clips, clip_info, rate, notes, shapes)
 
 
 class _Skeleton(NamedTuple):
@@ -299,6 +300,8 @@ def _geometry(all_meshes, chosen, names, skel: _Skeleton, unweighted, parents, n
     jn, jpos, jparents, jnames, ghost = skel
     pos_list, tri_list, vj, jj, ww = [], [], [], [], []
     mesh_info = []
+    shapes, shape_of = [], {}  # merged blend shapes; (scene mesh, its shape) -> merged index
+    shape_names = set()
     base = 0
     bind_spread = 0.0
     for i in chosen:
@@ -313,6 +316,7 @@ def _geometry(all_meshes, chosen, names, skel: _Skeleton, unweighted, parents, n
             owner = n if n in jpos else next(a for a in _ancestors(parents, n) if a in jpos)
             g = bind[jpos[owner]] @ np.linalg.solve(nworld[owner], m.to_world)
             q = p @ g[:3, :3].T + g[:3, 3]
+            lin = (g[:3, :3], None)
             vj.append(np.arange(nv) + base)
             jj.append(np.full(nv, jpos[owner]))
             ww.append(np.ones(nv))
@@ -332,6 +336,7 @@ def _geometry(all_meshes, chosen, names, skel: _Skeleton, unweighted, parents, n
                     spread = float(np.max(diff * np.r_[np.ones(3), 1.0 / ref][None, None, :]))
                     bind_spread = max(bind_spread, spread)
             q = p if np.allclose(g, np.eye(4), rtol=0, atol=1e-12) else p @ g[:3, :3].T + g[:3, 3]
+            lin = (np.eye(3) if q is p else g[:3, :3], None)
             vj.append(s.vertex + base)
             jj.append(sj_of[s.joint])
             ww.append(s.weight)
@@ -341,6 +346,7 @@ def _geometry(all_meshes, chosen, names, skel: _Skeleton, unweighted, parents, n
                 gu = bind[jpos[owner]] @ np.linalg.solve(nworld[owner], m.to_world)
                 u = unweighted[i]
                 q[u] = p[u] @ gu[:3, :3].T + gu[:3, 3]
+                lin = (lin[0], (u, gu[:3, :3]))
                 vj.append(u + base)
                 jj.append(np.full(len(u), jpos[owner]))
                 ww.append(np.ones(len(u)))
@@ -349,6 +355,7 @@ def _geometry(all_meshes, chosen, names, skel: _Skeleton, unweighted, parents, n
             mesh_info.append({"name": m.name, "kind": "skinned", "vertices": nv})
         pos_list.append(q)
         tri_list.append(m.triangles + base)
+        _merge_shapes(i, m, lin, base, shapes, shape_of, shape_names, len(chosen) > 1)
         base += nv
     if bind_spread > 1e-6:
         notes.append(f"skins were bound in different poses (inverse binds disagree by {bind_spread:.2g} "
@@ -365,10 +372,56 @@ def _geometry(all_meshes, chosen, names, skel: _Skeleton, unweighted, parents, n
     jw = np.where(total[:, None] > 0, jw / np.where(total > 0, total, 1.0)[:, None], jw).astype(np.float32)
     if budget is not None:
         budget.claim(ji.nbytes + jw.nbytes, "skin weights")
-    return positions, triangles, ji, jw, mesh_info, weights_normalised
+    return positions, triangles, ji, jw, mesh_info, weights_normalised, shapes, shape_of
 
 
-def _clips(scene: Scene, path, fps, budget, skel: _Skeleton, parents, rest, bind, positions, ji, jw):
+def _merge_shapes(i, m, lin, base, shapes, shape_of, taken, prefix):
+    """Scene mesh ``i``'s blend shapes into the merged mesh: its offsets moved into skeleton
+    space by the linear part of the affine map its points took (``lin = (A, (u, A_u) or None)``:
+    ``A`` for the mesh, ``A_u`` for its unweighted vertices ``u``; a shape displaces before the
+    map, so ``G (p + d) = G p + A d``), indices shifted by ``base``, names made unique (prefixed
+    by the mesh's name when several meshes are merged)."""
+    from ...model import BlendShape
+    from ..common import unique_name
+
+    if not m.shapes:
+        return
+    A, over = lin
+    for s, sh in enumerate(m.shapes):
+        name = unique_name(f"{m.name}_{sh.name}" if prefix else sh.name, taken)
+        taken.add(name)
+
+        def mv(o, idx=sh.indices):
+            out = np.asarray(o, dtype=np.float64) @ np.asarray(A).T
+            if over is not None:
+                hit = np.isin(idx, over[0])
+                out[hit] = np.asarray(o, dtype=np.float64)[hit] @ over[1].T
+            return out.astype(np.float32)
+        shape_of[(i, s)] = len(shapes)
+        shapes.append(BlendShape(name, sh.indices.astype(np.int64) + base, mv(sh.offsets),
+                                 tuple((w, mv(o)) for w, o in sh.inbetweens)))
+
+
+def _sample_weights(a, frames, rate, shape_of, S, key_tol):
+    """(f, S) blend-shape weights of animation ``a`` on the grid ``frames``, each channel with its
+    own interpolation (:func:`timeline.sample_channel`, clamped at its ends; shapes no channel
+    drives are 0)."""
+    from .timeline import sample_channel
+
+    W = np.zeros((len(frames), S))
+    for ch in a.weights:
+        if not len(ch.times):
+            continue
+        vals = sample_channel(ch, frames / rate, key_tol)
+        for s in range(vals.shape[1]):
+            k = shape_of.get((ch.node, s))
+            if k is not None:
+                W[:, k] = vals[:, s]
+    return W
+
+
+def _clips(scene: Scene, path, fps, budget, skel: _Skeleton, parents, rest, bind, positions, ji, jw,
+           shape_of=None, S=0):
     """``(clips, clip_info, rate)``: every animation with keys sampled on the one frame grid of
     ``rate`` frames per second, with its summary row (and its resampling error bound when keys
     fall between frames)."""
@@ -377,6 +430,7 @@ def _clips(scene: Scene, path, fps, budget, skel: _Skeleton, parents, rest, bind
     keyed = []
     for a in scene.animations:
         chans = [c for c in a.channels if len(c.times) and not c.static]
+        chans += [c for c in a.weights if len(c.times) and not c.static and S]
         keys = np.unique(np.concatenate([c.times for c in chans])) if chans else np.zeros(0)
         if a.span is not None and len(keys):
             lo, hi = a.span
@@ -425,7 +479,8 @@ def _clips(scene: Scene, path, fps, budget, skel: _Skeleton, parents, rest, bind
                                     path=path, clip=name, jnames=jnames)
             info["error_bound"] = _resampling_bound(frames, rate, jl, off_keys, jl_keys, jparents, bind,
                                                     positions, ji, jw)
-        clips.append(_grid_clip(name, frames, jl))
+        W = _sample_weights(a, frames, rate, shape_of or {}, S, GRID_KEY_FRAMES / rate) if S else None
+        clips.append(_grid_clip(name, frames, jl, W))
         clip_info.append(info)
     if not clips and nj:
         shown = _shown_pose(nlocal, static_t, static_q, static_s, sub, sub_of, sub_parents, jsub, jparents,
@@ -463,13 +518,14 @@ def _shown_pose(nlocal, static_t, static_q, static_s, sub, sub_of, sub_parents, 
     return _grid_clip(name, np.zeros(1), jl), info
 
 
-def _grid_clip(name, frames, local) -> Clip:
-    """The clip as the asset stores it: the joint locals ``local`` (f, b, 4, 4) on the grid ``frames``."""
-    return Clip(name, frames, local)
+def _grid_clip(name, frames, local, shape_weights=None) -> Clip:
+    """The clip as the asset stores it: the joint locals ``local`` (f, b, 4, 4) on the grid ``frames``
+    (and the blend-shape weights (f, S) there)."""
+    return Clip(name, frames, local, shape_weights)
 
 
 def _skinned_mesh(scene: Scene, source, all_meshes, chosen, skel: _Skeleton, bind, rest, positions, triangles,
-                  ji, jw, mesh_info, weights_normalised, clips, clip_info, rate, notes) -> SkinnedMesh:
+                  ji, jw, mesh_info, weights_normalised, clips, clip_info, rate, notes, shapes=()) -> SkinnedMesh:
     """The built mesh, and its provenance (``source`` completed)."""
     jn, jpos, jparents, jnames, ghost = skel
     size = model_scale(positions)
@@ -479,13 +535,16 @@ def _skinned_mesh(scene: Scene, source, all_meshes, chosen, skel: _Skeleton, bin
     src = dict(source or {})
     src.update({"meshes": [all_meshes[i].name for i in chosen], "mesh_info": mesh_info,
                 "clip_info": clip_info, "weights_normalised": weights_normalised,
-                "morph_meshes": {m.name: m.morph_targets for m in (all_meshes[i] for i in chosen) if m.morph_targets},
+                # morph targets a reader found but did not carry (carried ones are blend_shapes)
+                "morph_meshes": {m.name: m.morph_targets for m in (all_meshes[i] for i in chosen)
+                                 if m.morph_targets and not m.shapes},
                 "notes": notes, "sampling_note": scene.sampling_note,
                 "meshes_left_out": [m.name for i, m in enumerate(all_meshes) if i not in chosen and len(m.triangles)]})
     return SkinnedMesh(
         positions=positions.astype(np.float32), triangles=triangles, joint_indices=ji, joint_weights=jw,
         joint_names=jnames, parents=jparents, bind_transforms=bind, rest_transforms=rest,
-        geom_bind=np.eye(4), clips=tuple(clips), time_codes_per_second=rate, source=src)
+        geom_bind=np.eye(4), clips=tuple(clips), time_codes_per_second=rate, source=src,
+        blend_shapes=tuple(shapes))
 
 
 def _scaled_nodes(scene, nlocal) -> set:

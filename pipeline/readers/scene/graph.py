@@ -58,7 +58,9 @@ class SceneMesh:
         node's transform; the node's world transform otherwise).
     skin : Skin or None
     morph_targets : int
-        Number of morph targets / shape keys (not carried into the collider).
+        Number of morph targets / shape keys the source has.
+    shapes : list of model.BlendShape
+        Its blend shapes (morph targets), carried: mesh-local point indices, mesh-space offsets.
     """
 
     name: str
@@ -68,6 +70,7 @@ class SceneMesh:
     to_world: np.ndarray
     skin: Skin | None = None
     morph_targets: int = 0
+    shapes: list = field(default_factory=list)
 
 
 @dataclass
@@ -94,6 +97,9 @@ class Animation:
     name: str
     channels: list
     span: tuple | None = None
+    #: blend-shape weight channels: :class:`Channel` with ``node`` the index of the scene mesh
+    #: whose shapes it drives, ``path`` ``"w"`` and one value column per shape of that mesh
+    weights: list = field(default_factory=list)
 
 
 @dataclass
