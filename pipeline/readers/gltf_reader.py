@@ -385,6 +385,7 @@ def _read_scene(path, budget: AllocationBudget):
             ibm = np.tile(np.eye(4), (len(joints), 1, 1))
         skins.append((np.array([new[j] for j in joints], dtype=np.int64), ibm))
     meshes = []
+    node_meshes = {}  # glTF node -> indices into meshes of its primitives (their morph targets)
     gl_meshes = g.list("meshes")
     for ni in order:
         n = nodes[ni]
@@ -443,16 +444,19 @@ def _read_scene(path, budget: AllocationBudget):
                 if vv:
                     sk = Skin(skin[0], skin[1], [names[x] for x in skin[0]], np.concatenate(vv),
                               np.concatenate(jj), np.concatenate(ww))
+            node_meshes.setdefault(ni, []).append(len(meshes))
             meshes.append(SceneMesh(
                 name=mname, node=int(new[ni]), positions=pos, triangles=tri,
                 to_world=np.eye(4) if sk is not None else world[new[ni]], skin=sk,
-                morph_targets=len(prim.get("targets") or [])))
+                morph_targets=len(prim.get("targets") or []),
+                shapes=_morph_shapes(g, gm, prim, nv, what, path)))
 
     # ---- animations -----------------------------------------------------------------------
     anims = []
     for ai, a in enumerate(g.list("animations")):
         samplers = a.get("samplers") or []
         chans = []
+        weights = _weight_channels(g, a, ai, samplers, nodes, node_meshes, meshes, path)
         for ci, ch in enumerate(a.get("channels") or []):
             tgt = ch.get("target") or {}
             p = _PATHS.get(tgt.get("path"))
@@ -494,9 +498,94 @@ def _read_scene(path, budget: AllocationBudget):
                     v = v / nrm[:, None]
             if len(t):
                 chans.append(Channel(int(new[node]), p, t, v, interp))
-        anims.append(Animation(str(a.get("name") or ""), chans))
+        anims.append(Animation(str(a.get("name") or ""), chans, weights=weights))
     return Scene(names=names, parents=parents, local=local, meshes=meshes, animations=anims,
                  sampling_note="glTF samplers read from the file"), g
+
+
+def _morph_shapes(g, gm, prim, nv, what, path) -> list:
+    """A primitive's morph targets as :class:`model.BlendShape` (glTF 2.0 section 3.7.2.2: the
+    morphed position is ``POSITION + sum_i w_i POSITION_i``, linear in the weights: no
+    in-betweens), each on the vertices it moves; named by the mesh's ``extras.targetNames`` where
+    given.  Targets without POSITION move nothing (normals and tangents are not collision)."""
+    from ..model import BlendShape
+
+    targets = prim.get("targets") or []
+    names = (gm.get("extras") or {}).get("targetNames") if isinstance(gm.get("extras"), dict) else None
+    out = []
+    for ti, t in enumerate(targets):
+        name = str(names[ti]) if isinstance(names, list) and ti < len(names) else f"target_{ti}"
+        if not isinstance(t, dict) or "POSITION" not in t:
+            off = np.zeros((0, 3))
+            idx = np.zeros(0, np.int64)
+        else:
+            d = g.accessor(t["POSITION"], f"{what} morph target {ti} POSITION").astype(np.float64)
+            if d.shape != (nv, 3):
+                raise InputError(path, f"{what}: morph target {ti} POSITION is {d.shape}, expected ({nv}, 3)")
+            check_finite(path, f"{what} morph target {ti} positions", d)
+            idx = np.flatnonzero(np.any(d != 0, axis=1))
+            off = d[idx]
+        out.append(BlendShape(name, idx, off))
+    return out
+
+
+def _default_weights(gm, node, count) -> np.ndarray:
+    """A mesh instance's morph weights when no animation drives them: the node's ``weights``,
+    else the mesh's, else 0 (glTF 2.0 section 3.7.2.2)."""
+    w = node.get("weights") if node.get("weights") is not None else gm.get("weights")
+    out = np.zeros(count)
+    if w:
+        w = np.asarray(w, dtype=np.float64).reshape(-1)[:count]
+        out[:len(w)] = w
+    return out
+
+
+def _weight_channels(g, a, ai, samplers, nodes, node_meshes, meshes, path) -> list:
+    """Animation ``a``'s morph-weight channels (``target.path == "weights"``) as weight
+    :class:`Channel` per scene mesh (each primitive of the node's mesh), with their sampler's
+    interpolation (LINEAR, STEP, CUBICSPLINE: the glTF spec's Hermite, in-tangent / value /
+    out-tangent per key); a mesh instance the animation does not drive keeps its default weights
+    (a static channel)."""
+    out, driven = [], set()
+    for ci, ch in enumerate(a.get("channels") or []):
+        tgt = ch.get("target") or {}
+        if tgt.get("path") != "weights" or not isinstance(tgt.get("node"), int):
+            continue
+        ni = tgt["node"]
+        if ni not in node_meshes:
+            continue
+        what = f"animation {ai} channel {ci}"
+        si = ch.get("sampler")
+        if not isinstance(si, int) or not 0 <= si < len(samplers):
+            raise InputError(path, f"{what}: sampler {si!r} out of range")
+        smp = samplers[si]
+        interp = smp.get("interpolation", "LINEAR")
+        if interp not in ("LINEAR", "STEP", "CUBICSPLINE"):
+            raise InputError(path, f"animation {ai}: unknown interpolation {interp!r}")
+        t = g.accessor(smp["input"], what + " input").astype(np.float64).reshape(-1)
+        v = g.accessor(smp["output"], what + " output").astype(np.float64).reshape(-1)
+        count = len(meshes[node_meshes[ni][0]].shapes)
+        if count == 0 or len(t) == 0:
+            continue
+        per = 3 if interp == "CUBICSPLINE" else 1
+        if len(v) != per * len(t) * count:
+            raise InputError(path, f"{what}: {len(v)} morph weights for {len(t)} keys x {count} targets"
+                             + (" x 3 (CUBICSPLINE)" if per == 3 else ""))
+        check_finite(path, f"{what} key times", t[:, None])
+        check_finite(path, f"{what} morph weights", v[:, None])
+        if len(t) > 1 and np.any(np.diff(t) <= 0):
+            raise InputError(path, f"{what}: key times are not strictly increasing")
+        v = v.reshape(len(t), 3, count) if per == 3 else v.reshape(len(t), count)
+        driven.add(ni)
+        out += [Channel(m, "w", t, v, interp) for m in node_meshes[ni]]
+    for ni, ms in node_meshes.items():
+        if ni in driven or not meshes[ms[0]].shapes:
+            continue
+        gm = g.item("meshes", nodes[ni]["mesh"], f"node {ni}")
+        w = _default_weights(gm, nodes[ni], len(meshes[ms[0]].shapes))
+        if np.any(w != 0):
+            out += [Channel(m, "w", np.zeros(1), w[None], static=True) for m in ms]
+    return out
 
 
 def read_gltf(path, meshes=None, fps=None):

@@ -63,7 +63,7 @@ def fold_root_scale(mesh: SkinnedMesh, k: float) -> SkinnedMesh:
         out[..., ~roots, :3, 3] *= k
         return out
 
-    clips = tuple(type(c)(c.name, c.times, locals_(c.local)) for c in mesh.clips)
+    clips = tuple(type(c)(c.name, c.times, locals_(c.local), c.shape_weights) for c in mesh.clips)
     return mesh.replace(bind_transforms=mesh.bind_transforms @ unscale,
                         rest_transforms=locals_(mesh.rest_transforms), clips=clips)
 

@@ -170,7 +170,7 @@ class GltfReference(Reference):
         for a in self.doc.animations:
             self.clips.append(RefClip(a.name, a.key_times, "/".join(a.interpolations) or "-"))
         if morph:
-            self.notes.append(f"{len(morph)} animations have morph-weight channels (not applied: {', '.join(morph[:3])}"
+            self.notes.append(f"{len(morph)} animations have morph-weight channels (applied: {', '.join(morph[:3])}"
                               f"{', ...' if len(morph) > 3 else ''})")
         for p in self._prims:
             lo, hi = p.weight_sum_range
@@ -178,7 +178,7 @@ class GltfReference(Reference):
                 self.notes.append(f"{p.key}: weight sums {lo:.3f}..{hi:.3f} (compared normalised)")
         shaped = [p.key for p in self._prims if p.morph_targets and np.any(self.doc.default_morph_weights(p) != 0)]
         if shaped:
-            self.notes.append(f"non-zero default morph weights not applied: {', '.join(shaped)}")
+            self.notes.append(f"non-zero default morph weights (applied): {', '.join(shaped)}")
         _, conflicts = self.doc.bind_world()
         if conflicts:
             self.notes.append(f"{conflicts} joints have different inverse binds in different skins")
@@ -366,6 +366,8 @@ class AssetRig:
                 else:
                     x = sq.ComputeSkinningTransforms(t)
                 pts = UsdGeom.Mesh(prim).GetPointsAttr().Get(t)
+                if not at_bind:
+                    usd_eval.apply_blend_shapes(sq, q, pts, t)
                 if not q.ComputeSkinnedPoints(x, pts, t):
                     raise ValueError(f"{self.path}: UsdSkel cannot skin {prim.GetPath()} at {tc}")
                 w = np.array(xf.GetLocalToWorldTransform(sq.GetPrim()), dtype=np.float64).reshape(4, 4).T

@@ -20,9 +20,10 @@ What it covers
   (lerp, and slerp for rotations along the shorter arc, as Appendix "Interpolation" and every
   implementation do), ``STEP`` and ``CUBICSPLINE`` (Hermite with in/out tangents scaled by the
   key interval, rotations normalised after).  Times are seconds; outside a sampler's key range
-  its first/last value holds.  ``weights`` channels (morph targets) are reported, not applied,
-  and neither are default morph weights (:attr:`Primitive.morph_targets` says a primitive has
-  targets; :meth:`GltfDocument.default_morph_weights` gives the weights a viewer would show).
+  its first/last value holds.  Morph targets (3.7.2.2) are applied before skinning: POSITION
+  plus the weighted target displacements, the weights from the animation's ``weights`` channel
+  of the node (its sampler, CUBICSPLINE included) or else the node's / mesh's default weights
+  (:meth:`GltfDocument.morphed_positions`); the bind pose is POSITION as written.
 
 Weights convention
 ------------------
@@ -123,7 +124,7 @@ class Animation:
     interpolations : tuple of str
         Interpolations its samplers use, sorted.
     morph_channels : int
-        ``weights`` channels (morph target animation; not applied by this evaluator).
+        ``weights`` channels (morph target animation, applied by :meth:`GltfDocument.poses`).
     """
 
     index: int
@@ -132,6 +133,8 @@ class Animation:
     interpolations: tuple
     morph_channels: int
     channels: tuple = field(repr=False, default=())  # (node, path, input (k,), output (k, c) or (k, 3, c), interpolation)
+    #: ``weights`` channels: (node, input (k,), output (k, T) or (k, 3, T), interpolation)
+    weight_channels: tuple = field(repr=False, default=())
 
 
 def _read_container(path):
@@ -444,7 +447,38 @@ class GltfDocument:
         """Node indices of skin ``skin``'s joints."""
         return list(self.doc["skins"][skin]["joints"])
 
-    def skin_points(self, prim: Primitive, joint_world: np.ndarray, normalise: bool = True) -> np.ndarray:
+    def morph_offsets(self, prim: Primitive) -> np.ndarray:
+        """``(targets, vertex_count, 3)`` float64 POSITION displacements of the primitive's morph
+        targets (3.7.2.2; a target without POSITION moves nothing)."""
+        tg = self.doc["meshes"][prim.mesh]["primitives"][prim.index].get("targets", [])
+        out = np.zeros((len(tg), prim.vertex_count, 3))
+        for i, t in enumerate(tg):
+            if "POSITION" in t:
+                out[i] = self.accessor(t["POSITION"])
+        return out
+
+    def morph_weights(self, prim: Primitive, animation, times) -> np.ndarray:
+        """``(T, targets)`` morph weights of the primitive's node at ``times`` seconds: the
+        animation's ``weights`` channel for the node (its sampler), else the default weights."""
+        times = np.atleast_1d(np.asarray(times, dtype=np.float64))
+        w = np.broadcast_to(self.default_morph_weights(prim)[:prim.morph_targets], (len(times), prim.morph_targets))
+        w = np.array(w)
+        if animation is not None:
+            anim = animation if isinstance(animation, Animation) else self.animations[animation]
+            for node, inp, out, interp in anim.weight_channels:
+                if node == prim.node:
+                    w = self.sample(inp, out, interp, "weights", times)
+        return w
+
+    def morphed_positions(self, prim: Primitive, animation, times) -> np.ndarray:
+        """``(T, vertex_count, 3)`` POSITION plus the weighted morph targets (3.7.2.2)."""
+        p = self.positions(prim)
+        if not prim.morph_targets:
+            return np.broadcast_to(p, (len(np.atleast_1d(times)),) + p.shape)
+        return p[None] + np.einsum("ti,ivc->tvc", self.morph_weights(prim, animation, times), self.morph_offsets(prim))
+
+    def skin_points(self, prim: Primitive, joint_world: np.ndarray, normalise: bool = True,
+                    points=None) -> np.ndarray:
         """Linear blend skinning of a skinned primitive (3.7.3.3).
 
         Parameters
@@ -458,7 +492,7 @@ class GltfDocument:
         -------
         (vertex_count, 3) float64 world positions ``sum_k w_k * joint_world[j_k] @ IBM[j_k] @ p``.
         """
-        p = self.positions(prim)
+        p = self.positions(prim) if points is None else points
         j, w = self.influences(prim)
         if normalise:
             s = w.sum(axis=1, keepdims=True)
@@ -479,6 +513,7 @@ class GltfDocument:
     # ------------------------------------------------------------------ animations
     def _collect_animation(self, index, a):
         chans, times, interps, morph = [], [], set(), 0
+        wchans = []
         for ch in a.get("channels", []):
             tgt = ch.get("target", {})
             if "node" not in tgt:
@@ -487,6 +522,12 @@ class GltfDocument:
             interp = samp.get("interpolation", "LINEAR")
             if tgt["path"] == "weights":
                 morph += 1
+                inp = self.accessor(samp["input"])[:, 0].astype(np.float64)
+                out = self.accessor(samp["output"]).astype(np.float64).reshape(-1)
+                nt = len(self.doc["meshes"][self.doc["nodes"][tgt["node"]]["mesh"]]["primitives"][0].get("targets", []))
+                if len(inp) and nt:
+                    out = out.reshape(len(inp), 3, nt) if interp == "CUBICSPLINE" else out.reshape(len(inp), nt)
+                    wchans.append((tgt["node"], inp, out, interp))
                 continue
             if tgt["path"] not in ("translation", "rotation", "scale"):
                 continue
@@ -505,7 +546,7 @@ class GltfDocument:
             interps.add(interp)
         name = a.get("name") or f"animation_{index}"
         kt = np.unique(np.concatenate(times)) if times else np.zeros(0)
-        return Animation(index, name, kt, tuple(sorted(interps)), morph, tuple(chans))
+        return Animation(index, name, kt, tuple(sorted(interps)), morph, tuple(chans), tuple(wchans))
 
     @staticmethod
     def sample(inp, out, interp, path, times) -> np.ndarray:
@@ -596,15 +637,16 @@ class GltfDocument:
         list (T) of lists of (vertex_count, 3) float64.
         """
         worlds = self.world(self.local_transforms(animation, times))
+        morphed = [self.morphed_positions(prim, animation, times) for prim in self.primitives]
         out = []
-        for world in worlds:
+        for f, world in enumerate(worlds):
             frame = []
-            for prim in self.primitives:
+            for k, prim in enumerate(self.primitives):
                 if prim.skinned:
-                    frame.append(self.skin_points(prim, world[self.skin_joints(prim.skin)], normalise))
+                    frame.append(self.skin_points(prim, world[self.skin_joints(prim.skin)], normalise, morphed[k][f]))
                 else:
                     m = world[prim.node]
-                    frame.append(self.positions(prim) @ m[:3, :3].T + m[:3, 3])
+                    frame.append(morphed[k][f] @ m[:3, :3].T + m[:3, 3])
             out.append(frame)
         return out
 
@@ -645,7 +687,7 @@ class GltfDocument:
 
     def default_morph_weights(self, prim: Primitive) -> np.ndarray:
         """``(targets,)`` float64 morph weights shown without animation (node ``weights``, else the
-        mesh's, else zeros); not applied by this evaluator."""
+        mesh's, else zeros), applied where no animation drives them."""
         w = self.doc["nodes"][prim.node].get("weights", self.doc["meshes"][prim.mesh].get("weights"))
         return np.zeros(prim.morph_targets) if w is None else np.asarray(w, dtype=np.float64)
 

@@ -202,6 +202,8 @@ class UsdSkelReference:
                 out.append(_apply(gm, pts))
             else:
                 pts = self._points(prim, tc)
+                if not at_bind:
+                    apply_blend_shapes(sq, q, pts, tc)
                 if not q.ComputeSkinnedPoints(skin_xf[key], pts, tc):
                     raise ValueError(f"{self.path}: UsdSkel cannot skin {target.path} at {time}")
                 out.append(_apply(skel_w, np.asarray(pts, dtype=np.float64).reshape(-1, 3)))
@@ -219,6 +221,27 @@ class UsdSkelReference:
             m = q.ComputeSkinnedTransform(sq.ComputeSkinningTransforms(tc), tc)
             out[target.path] = _m44(xf.GetLocalToWorldTransform(sq.GetPrim())) @ _m44(m)
         return out
+
+
+def apply_blend_shapes(sq, q, pts, tc):
+    """UsdSkel's blend shapes on ``pts`` (a Vt.Vec3fArray, in place) at time code ``tc``: the
+    skeleton's animation's ``blendShapeWeights`` mapped to the prim's ``skel:blendShapes``
+    (``SkinningQuery.GetBlendShapeMapper``), then ``BlendShapeQuery``'s sub-shape weights and
+    ``ComputeDeformedPoints`` (what ``UsdSkel.BakeSkinning`` does before skinning).  No-op when the
+    prim binds no shapes or the skeleton has no animation."""
+    if not q.HasBlendShapes():
+        return pts
+    aq = sq.GetAnimQuery()
+    if not aq:
+        return pts
+    w = aq.ComputeBlendShapeWeights(tc)
+    mapper = q.GetBlendShapeMapper()
+    if mapper:
+        w = mapper.Remap(w)
+    bq = UsdSkel.BlendShapeQuery(UsdSkel.BindingAPI(q.GetPrim()))
+    sw, bi, si = bq.ComputeSubShapeWeights(w)
+    bq.ComputeDeformedPoints(sw, bi, si, bq.ComputeBlendShapePointIndices(), bq.ComputeSubShapePointOffsets(), pts)
+    return pts
 
 
 def load(path) -> UsdSkelReference:
