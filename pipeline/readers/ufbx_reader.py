@@ -369,8 +369,88 @@ def _mesh_records(r: _Read, budget, notes, items):
                                 "bind_world": _m44(clusters[0].bind_to_world) @ _m44(clusters[0].mesh_node_to_bone)})
         shapes = sum(len(_items(bd.channels)) for bd in _items(mesh.blend_deformers))
         meshes.append(SceneMesh(name=mesh.name or node.name, node=node_i, positions=pts, triangles=tri, to_world=to_world,
-                                skin=skin, morph_targets=shapes))
+                                skin=skin, morph_targets=shapes, shapes=_blend_shapes(r.path, mesh, nv)))
     return meshes, skinned
+
+
+def _blend_channels(mesh) -> list:
+    """The mesh's blend channels (every blend deformer's, in order) that have keyframes."""
+    out = []
+    for bd in _items(mesh.blend_deformers):
+        for ch in _items(_safe(bd).channels):
+            if _items(ch.keyframes):
+                out.append(_safe(ch))
+    return out
+
+
+def _blend_shapes(path, mesh, nv) -> list:
+    """FBX blend channels as :class:`model.BlendShape` (mesh space, control points): a channel's
+    keyframes (its target shapes at ``FullWeights`` / 100, ufbx's ``target_weight``) are the knots
+    of UsdSkel's piecewise-linear interpolation, the last one the primary shape at weight 1 (the
+    others in-betweens at ``target_weight / last``, and the channel's ``DeformPercent`` / 100
+    divided by the last one is the UsdSkel weight: :func:`_stack_shape_weights`); every keyframe's
+    offsets on the union of their vertices (0 where a shape does not move one)."""
+    from ..model import BlendShape
+
+    out = []
+    for ch in _blend_channels(mesh):
+        kfs = sorted(_items(ch.keyframes), key=lambda k: float(k.target_weight))
+        tws = np.array([float(k.target_weight) for k in kfs])
+        last = tws[-1]
+        if not (np.isfinite(tws).all() and last > 0 and (tws > 0).all() and len(np.unique(tws)) == len(tws)):
+            raise InputError(path, f"blend channel {ch.name!r}: in-between weights {tws.tolist()} (expected "
+                             "distinct positive FullWeights)")
+        per = []
+        for k in kfs:
+            sh = _safe(k.shape)
+            idx = _u32s(sh.offset_vertices).astype(np.int64)
+            off = _vec3s(sh.position_offsets) if len(idx) else np.zeros((0, 3))
+            if len(idx) != len(off) or (len(idx) and idx.max() >= nv):
+                raise InputError(path, f"blend shape {sh.name!r}: offsets do not match the mesh's {nv} control points")
+            check_finite(path, f"blend shape {sh.name!r} offsets", off if len(off) else np.zeros((1, 3)))
+            per.append((idx, off))
+        union = np.unique(np.concatenate([i for i, _ in per])) if per else np.zeros(0, np.int64)
+        pos = {int(v): n for n, v in enumerate(union)}
+
+        def dense(idx, off):
+            d = np.zeros((len(union), 3))
+            d[[pos[int(v)] for v in idx]] = off
+            return d
+        knots = [dense(i, o) for i, o in per]
+        out.append(BlendShape(ch.name or f"channel_{len(out)}", union, knots[-1],
+                              tuple((float(t / last), kn) for t, kn in zip(tws[:-1], knots[:-1]))))
+    return out
+
+
+def _stack_shape_weights(r, scene_meshes, stacks) -> list:
+    """Per stack, ``{scene mesh index: (f, S) weights}``: each blend channel's DeformPercent as
+    ufbx evaluates it at the stack's frames (``evaluate_blend_weight``), over its last keyframe's
+    target weight (the UsdSkel weight of :func:`_blend_shapes`)."""
+    import ufbx
+
+    by_stack = {st.name: st for st in _items(r.scene.anim_stacks)}
+    out = []
+    for name, _, seconds, _ in stacks:
+        st = by_stack.get(name)
+        per = {}
+        for mi, sm in enumerate(scene_meshes):
+            if not sm.shapes or st is None:
+                continue
+            mesh = _safe(r.nodes[sm.node].mesh)
+            chans = _blend_channels(mesh)
+            last = np.array([max(float(k.target_weight) for k in _items(c.keyframes)) for c in chans])
+            w = np.array([[float(ufbx.evaluate_blend_weight(st.anim, c, float(t))) for c in chans] for t in seconds])
+            check_finite(r.path, f"blend weights of mesh {sm.name!r} in {name!r}", w.reshape(len(seconds), -1))
+            per[mi] = w / last[None]
+        out.append(per)
+    return out
+
+
+def _shape_channels(x, si, seconds) -> list:
+    """Stack ``si``'s blend weights (:func:`_stack_shape_weights`) as weight channels, one per
+    scene mesh, sampled on the stack's frames (lerped between them, as UsdSkel does)."""
+    per = x.shape_weights[si] if getattr(x, "shape_weights", None) else {}
+    return [Channel(mi, "w", np.asarray(seconds, dtype=np.float64), w, "LINEAR") for mi, w in per.items()]
 
 
 def _bones_below(parents, meshes) -> bool:
@@ -474,11 +554,12 @@ def _extract(path, budget) -> _Extracted:
     if not (np.isfinite(rate) and 0 < rate <= 1000):
         rate = 30.0
     stacks = _sample_stacks(r, rate, budget)
+    shape_weights = _stack_shape_weights(r, scene_meshes, stacks)
     exact = _independent(path, skinned, stacks)
     return _Extracted(exact=exact, up=up, frame_note=frame_note, unit_meters=float(scene.settings.unit_meters or 0.01),
                       app=str(scene.metadata.original_application.name or ""), rate=rate, names=r.names,
                       parents=r.parents, helpers=r.helpers, world=r.world, theirs=r.theirs,
-                      meshes=scene_meshes, skinned=skinned, items=items, stacks=stacks)
+                      meshes=scene_meshes, skinned=skinned, items=items, stacks=stacks, shape_weights=shape_weights)
 
 
 def _independent(path, skinned, stacks) -> dict:
@@ -612,7 +693,7 @@ def read_ufbx(path, meshes=None, fps=None):
     checks = [("rest", r.compose(rest_local))]
     for si, (name, span, seconds, worlds) in enumerate(stacks):
         chans, recomposed, trs = _channels(r, rest_local, seconds, worlds)
-        anims.append(Animation(name, chans, span))
+        anims.append(Animation(name, chans, span, weights=_shape_channels(x, si, seconds)))
         for f in _check_frames(len(seconds)):
             label = f"{name} at {seconds[f]:.4g} s"
             checks.append((label, r.compose(recomposed[f])))

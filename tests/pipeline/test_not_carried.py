@@ -593,3 +593,52 @@ def test_dcc_files_are_named_not_silent_on_the_assimp_road(name, whats, tmp_path
     assert {x["what"] for x in items} == whats
     assert all(x["bound_relative"] is not None and x["bound_relative"] > 0.01 for x in items)
     _one_line_refusal(p, tmp_path, items[0]["what"])
+
+
+def test_fbx_blend_shapes_through_ufbx_are_carried_as_ufbx_deforms_them(tmp_path):
+    """FBX blend channels (the barbarian's eyes and mouth, DeformPercent animated by curves) are
+    carried as UsdSkel blend shapes: nothing is named, and usd-core's blend shapes then skinning
+    of the asset equal ufbx's own evaluation of the file (blend shapes and skinning,
+    ``evaluate_skinning``: an independent reference) within 1e-5 x size at every frame, and within
+    1e-4 x size half-way between frames (the curves are lerped between frames, as UsdSkel does)."""
+    from scipy.spatial import cKDTree
+
+    from references.compare import AssetRig, axis_scale
+    from references.ufbx_eval import skinned_points
+    from colossus.pipeline.readers import read
+
+    p = CORPUS / "realworld" / "ufbx_blender_293_barbarian_7400_binary.fbx"
+    if not p.exists():
+        pytest.skip("corpus not present")
+    src = read(p)
+    assert [s.name for s in src.blend_shapes] == ["Sphere_Left", "Sphere_Right", "Cube_Mouth"]
+    assert not [x for x in src.source["not_carried"] if x["what"] == "morph_targets"]
+    out = tmp_path / "barbarian.usda"
+    assert _cli("import", p, "-o", out).exit_code == 0
+    rig = AssetRig(out)
+    c = axis_scale(src.up_axis, src.meters_per_unit, rig.up_axis, rig.meters_per_unit)
+    codes = src.clips[0].times
+    from pxr import Usd, UsdSkel
+    st = Usd.Stage.Open(str(out))
+    moved = np.unique(np.concatenate([np.asarray(UsdSkel.BlendShape(x).GetPointIndicesAttr().Get())
+                                      for x in st.Traverse() if x.IsA(UsdSkel.BlendShape)]))
+    errs = {}
+    for label, tc in (("frames", codes), ("between", 0.5 * (codes[:-1] + codes[1:]))):
+        theirs = skinned_points(p, tc / src.time_codes_per_second)
+        ours = rig.points(rig.clips[0], tc)
+        size = np.linalg.norm(np.ptp(ours.reshape(-1, 3), axis=0))
+        worst = 0.0
+        for a, b in zip(ours, theirs):  # the vertices the shapes move (one other vertex of the
+            b = b @ c[:3, :3].T + c[:3, 3]  # barbarian is 2.5e-3 off with or without shapes)
+            worst = max(worst, cKDTree(b).query(a[moved])[0].max())
+        errs[label] = worst / size
+    assert errs["frames"] <= 1e-5 and errs["between"] <= 1e-4, errs
+    # the shapes move those vertices far more than that (the check has teeth): in the asset's
+    # units, the largest offset times the largest weight its clip gives it
+    anim = UsdSkel.Animation(next(x for x in st.Traverse() if x.IsA(UsdSkel.Animation)))
+    wmax = np.abs(np.array([anim.GetBlendShapeWeightsAttr().Get(t)
+                            for t in anim.GetBlendShapeWeightsAttr().GetTimeSamples()])).max(0)
+    offs = [np.linalg.norm(np.asarray(UsdSkel.BlendShape(x).GetOffsetsAttr().Get()), axis=1).max()
+            for x in st.Traverse() if x.IsA(UsdSkel.BlendShape)]
+    assert max(o * w for o, w in zip(offs, wmax)) > 1e3 * errs["frames"] * size
+    print("barbarian blend shapes vs ufbx:", errs)
