@@ -503,3 +503,29 @@ def test_blend_shape_usd_rig_imports_skins_and_validates_as_usd_core_skins_it(tm
     v = CliRunner().invoke(main, ["validate", str(out), "--source", str(src), "--format", "json"], prog_name="colossus")
     assert v.exit_code == 0, v.output
     print(f"{method}: asset vs source (usd-core) {err_asset / size:.2e} x size, runtime vs usd-core {err_rt / size:.2e}")
+
+
+def test_weld_merges_vertices_only_where_their_blend_shape_offsets_agree():
+    """Two pairs of coincident vertices with equal influences: the pair a shape moves alike merges,
+    the pair it moves apart stays two vertices; the shape's offsets follow the merged indices."""
+    from colossus.pipeline.model import BlendShape, Clip, SkinnedMesh
+    from colossus.pipeline.stages.weld import weld
+
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], np.float32)
+    tris = np.array([[0, 1, 2], [3, 5, 4]])
+    ji = np.zeros((6, 1), np.int32)
+    jw = np.ones((6, 1), np.float32)
+    shape = BlendShape("s", [1, 2, 3, 4], [[0, 0, 1], [0, 0, 1], [0, 0, 1], [0, 0, 2]])  # 1~3 alike, 2~4 not
+    m = SkinnedMesh(pos, tris, ji, jw, ("root",), np.array([-1]), np.eye(4)[None], np.eye(4)[None],
+                    clips=(Clip("c", np.zeros(1), np.eye(4)[None, None], np.ones((1, 1))),), blend_shapes=(shape,))
+    out, rep = weld(m)
+    assert out.vertex_count == 5 and rep.counts["kept_apart_by_shapes"] == 1
+    (s,) = out.blend_shapes
+    got = sorted((tuple(map(float, out.positions[i])), tuple(map(float, o))) for i, o in zip(s.indices, s.offsets))
+    assert got == [((0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), ((0.0, 1.0, 0.0), (0.0, 0.0, 2.0)),
+                   ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0))]
+    from colossus.pipeline.model import skin_points
+    # the welded mesh poses as the source at weight 1 (every source vertex has its twin)
+    a = skin_points(m, np.eye(4)[None], [1.0])
+    b = skin_points(out, np.eye(4)[None], [1.0])
+    assert {tuple(np.round(x, 6)) for x in a} == {tuple(np.round(x, 6)) for x in b}
