@@ -13,6 +13,9 @@ Conventions
   Skinned point of vertex ``v`` at frame ``f``::
 
       sum_k w[v,k] * skel[f, j[v,k]] @ inv(bind[j[v,k]]) @ geom_bind @ p[v]
+
+  with ``p[v]`` first displaced by the blend shapes at the frame's weights
+  (:class:`BlendShape`, ``Clip.shape_weights``; UsdSkel applies shapes before skinning).
 """
 
 from __future__ import annotations
