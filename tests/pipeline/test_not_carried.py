@@ -30,6 +30,14 @@ def _items(path, **kw):
 
 
 @pytest.fixture
+def ufbx_road():
+    """The tests of what the ufbx road carries: skipped where .fbx goes through assimp."""
+    from paths import fbx_road
+    if fbx_road() != "ufbx":
+        pytest.skip("FBX goes through assimp here (no ufbx, or COLOSSUS_FBX_READER=assimp)")
+
+
+@pytest.fixture
 def assimp_road(monkeypatch):
     """FBX read through assimp (the road without ufbx), whose checks name what it cannot carry."""
     monkeypatch.setenv("COLOSSUS_FBX_READER", "assimp")
@@ -108,7 +116,7 @@ def _skin(top):
     return W.find(top, "Deformer", "Skin")[0]
 
 
-def test_fbx_dual_quaternion_skin_through_ufbx_is_carried_as_ufbx_skins_it(tmp_path):
+def test_fbx_dual_quaternion_skin_through_ufbx_is_carried_as_ufbx_skins_it(tmp_path, ufbx_road):
     """SkinningType DualQuaternion: the asset says dualQuaternion, nothing is named, and usd-core's
     skinning of the asset equals ufbx's own dual-quaternion skinning of the file (an independent
     reference) within 1e-5 x size at every frame of the clip."""
@@ -152,7 +160,7 @@ def test_fbx_dual_quaternion_skin_warns_once_with_a_bound_and_strict_refuses(tmp
     _one_line_refusal(paths[0], tmp_path, "fbx_skinning_type")
 
 
-def test_fbx_blend_skin_through_ufbx_takes_the_nearer_method_with_its_bound(tmp_path):
+def test_fbx_blend_skin_through_ufbx_takes_the_nearer_method_with_its_bound(tmp_path, ufbx_road):
     """Maya's per-vertex Blend: all weights 0 is linear (nothing named); one vertex at 0.5 is
     skinned linearly (the nearer) with the bound 0.5 x its own linear / dual-quaternion gap, at
     most half the dual-quaternion file's largest gap."""
@@ -208,7 +216,7 @@ def _rrss_edit(scale, inherit):
     return f
 
 
-def test_fbx_inherit_type_rrss_through_ufbx_is_carried_and_checked(tmp_path, monkeypatch):
+def test_fbx_inherit_type_rrss_through_ufbx_is_carried_and_checked(tmp_path, ufbx_road, monkeypatch):
     """ufbx evaluates RrSs under a non-uniformly scaled parent (its helper nodes hold the parent
     scale each bone must not inherit): the keys reproduce ufbx's native evaluation (the file loaded
     again without helpers, clusters on the real bones) at rest and at the checked frames, so
@@ -263,7 +271,7 @@ def test_fbx_transform_skin_is_bounded_by_the_node_offset(tmp_path, road, monkey
     _one_line_refusal(paths[0], tmp_path, "fbx_transform_skin")
 
 
-def test_fbx_geometric_transform_on_a_skinned_mesh_through_ufbx_is_carried(tmp_path):
+def test_fbx_geometric_transform_on_a_skinned_mesh_through_ufbx_is_carried(tmp_path, ufbx_road):
     """ufbx binds the geometry in its geometric transform's space: nothing is left out, and the
     bind positions are the unedited ones moved by the geometric offset (one rigid shift)."""
     from colossus.pipeline.readers import read
@@ -332,7 +340,7 @@ def test_fbx_cubic_curve_between_sparse_keys(tmp_path, assimp_road):
     assert _items(_limb(tmp_path, edit(0x104), "linear", ascii_too=False)[0]) == []
 
 
-def test_fbx_cubic_curve_through_ufbx_is_evaluated_at_every_frame(tmp_path):
+def test_fbx_cubic_curve_through_ufbx_is_evaluated_at_every_frame(tmp_path, ufbx_road):
     """ufbx evaluates the cubic segment at every grid frame: the frames are the curve's, nothing to name."""
     from colossus.pipeline.readers import read
 
