@@ -1,46 +1,54 @@
 """FBX through **ufbx**, evaluated as the authoring tools evaluate it.
 
 Why ufbx and not assimp for FBX: assimp composes every FBX model as ``RSrs`` and ignores inherit
-types, pivots' full semantics, geometric transforms in skin binding and ``transform_skin``; ufbx
-(a single-file C loader, https://github.com/ufbx/ufbx, MIT / public domain) evaluates all of them
-and is tested against Maya's, 3ds Max's and MotionBuilder's own deformed meshes.  The registry's
-``ufbx`` wheel (0.0.5, by ufbx's author) is the binding; its two known reference-counting bugs are
-worked around in :func:`_safe` (a deliberate, bounded leak of element wrappers) and by never using
-its buffer protocol (arrays are copied out by iteration).  The reader runs in the contained child
-(:mod:`pipeline.isolation`) like every reader, so a crash of the binding is one error line.
+types, pivots' full semantics, geometric transforms in skin binding, ``transform_skin`` and the
+skinning type; ufbx (a single-file C loader, https://github.com/ufbx/ufbx, MIT / public domain)
+evaluates all of them and is tested against Maya's, 3ds Max's and MotionBuilder's own deformed
+meshes.  Measured on ``corpus/dcc`` (tests/references/dcc_errors.py, error / size at the tools'
+truth frames): 3ds Max's geometric / pivot transforms 0.66 -> 5.2e-5 (the OBJ's 4 decimals),
+Maya's transform_skin 0.58 -> 1.9e-7, Maya's blended skin 0.118 -> 0.040 (its stated bound
+0.044).  The registry's ``ufbx`` wheel (0.0.5, by ufbx's author) is the binding.  Its element
+lists hand out wrappers without a reference and its evaluated scenes crash at garbage collection,
+so every ufbx call runs in a forked child (:func:`_extract_contained`) that takes one reference per
+element it reads (:func:`_safe`), keeps every scene alive and leaves by ``os._exit``; only plain
+numpy data crosses back.  Arrays are copied out by iteration (its buffer protocol crashes).
 
 What is read and how
 --------------------
-* **Transforms**: every model's world transform as ufbx evaluates it (inherit types RrSs / RSrs /
-  Rrs, pre/post rotation, rotation and scaling pivots and offsets, rotation order) at rest and at
-  every frame of every animation stack on the file's own frame grid (``frames_per_second``).  The
-  node graph's local transforms are ``inv(parent world) @ world``; they go to the node-graph
-  builder (:mod:`.scene.build`) as translation / rotation / scale keys at those frames.  Where a
-  local transform has shear (an RrSs child under a non-uniformly scaled parent), the keys cannot
-  hold it: the difference is measured (below).
-* **Skins**: a cluster's ``geometry_to_bone`` (mesh geometry space, geometric transform
-  included, to bone space at bind time) is the joint's inverse bind; a skinned point is
-  ``sum_j w_j W_j(t) @ geometry_to_bone_j @ p`` exactly as ufbx and the FBX SDK skin it.
+* **Transforms**: the file loaded with ``inherit_mode_handling = HELPER_NODES`` (ufbx inserts
+  scale helper nodes so that every world transform is its parent's times its own ``T R S``, pivots,
+  offsets, pre/post rotation and rotation order folded in); each node's local ``T R S`` is
+  evaluated by ufbx at every frame of every animation stack on the file's own frame grid
+  (``frames_per_second``) and goes to the node-graph builder (:mod:`.scene.build`) as keys at
+  those frames.
+* **Skins**: a cluster's ``geometry_to_bone`` (mesh geometry space, geometric transform included,
+  to bone space at bind time) is the joint's inverse bind; a skinned point is
+  ``sum_j w_j W_j(t) @ geometry_to_bone_j @ p`` as ufbx and the FBX SDK skin it.  ``SkinningType``
+  DualQuaternion is UsdSkel's dual-quaternion skinning; Maya's per-vertex Blend has no UsdSkel
+  form: the nearer method, bounded (:func:`_skinning_method`).
 * **Maya's ``transform_skin``**: Maya moves a skinned mesh by its node's change since binding,
-  ``C(t) = N(t) @ inv(N_bind)`` (``N``: the mesh node's world transform; ``N_bind`` from the
-  cluster's bind-time ``Transform``).  For a file whose original application is Maya, with one
-  skinned mesh node and no rigid mesh under a bone, ``C(t)`` is folded into every node's world
-  transform (``sum_j w_j C W_j G_j p = C sum_j w_j W_j G_j p`` since the weights sum to one).
-  Elsewhere a ``C(t)`` that is not the identity is not carried (``fbx_transform_skin``, bounded).
+  ``C(t) = N(t) @ inv(N_bind)`` (``N``: the mesh node's world transform; ``N_bind`` its bind pose:
+  the cluster's bone bind times ``mesh_node_to_bone``).  For a file whose original application is
+  Maya, with one skinned mesh node and no rigid mesh under a bone, ``C(t)`` is folded into every
+  node's world transform (``sum_j w_j C W_j G_j p = C sum_j w_j W_j G_j p``: the weights sum to
+  one).  Elsewhere a ``C(t)`` that is not the identity is not carried (``fbx_transform_skin``,
+  bounded).
 * **Axes and units**: a right-handed Y-up or Z-up file keeps its axes (``up_axis``); any other
   axis system is converted by ufbx to Y-up at the root.  ``meters_per_unit`` is the file's
   ``UnitScaleFactor`` (ufbx's ``unit_meters``).
-* **Geometry**: control points; polygons triangulated by ear clipping in their best-fit plane
-  (convex polygons as fans).
+* **Geometry**: control points; triangles as they are, quads split at their reflex corner, larger
+  polygons by ear clipping in their best-fit plane.
 
 Fail closed
 -----------
-:func:`read_ufbx` checks its own result against the exact formula above at the rest pose and up
-to :data:`CHECK_FRAMES` frames of every clip: the largest vertex difference is one
-``fbx_evaluation`` record when it exceeds :data:`EVAL_TOLERANCE` x the model size.  What ufbx
-evaluates but the collider cannot carry yet (dual-quaternion or blended skinning, blend shapes,
-constraints) is named by :mod:`.fbx_checks` with its bound, as on the assimp path; more than one
-instance of a skinned mesh is ``fbx_instanced_skin`` (the first instance is taken).
+The keys are checked against an independent evaluation: the file loaded a second time *without*
+helper nodes (inherit types evaluated natively, clusters on the real bones), skinned from ufbx's
+own node transforms at rest and at :data:`CHECK_FRAMES` frames of every stack; the largest vertex
+difference is one ``fbx_evaluation`` record when over :data:`EVAL_TOLERANCE` x the posed size.
+Halfway between those frames the same evaluation measures how far the file's curves leave the
+keys' lerp / slerp: a resampling bound stated in the summary.  What the collider cannot carry yet
+(blend shapes, constraints) is named by :mod:`.fbx_checks` with its bound; more than one instance
+of a skinned mesh is ``fbx_instanced_skin`` (the first instance is taken).
 """
 
 from __future__ import annotations
