@@ -494,7 +494,7 @@ def test_numpy_dual_quaternions_agree_with_usd_core(tmp_path):
 
 
 # ------------------------------------------------------------------------------ the record
-def test_summary_json_provenance_and_inspect_carry_the_record(tmp_path):
+def test_summary_json_provenance_and_inspect_carry_the_record(tmp_path, assimp_road):
     p = paths_dq(tmp_path)
     out = tmp_path / "dq.usda"
     r = _cli("import", p, "-o", out, "--json")
