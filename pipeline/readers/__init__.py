@@ -21,7 +21,7 @@ ASSIMP_EXTENSIONS = (
     ".bvh", ".md5mesh", ".md5anim", ".smd", ".vta", ".ms3d", ".b3d", ".x3d", ".3mf", ".lwo",
     ".lws", ".ase", ".ask", ".ac", ".ac3d", ".acc", ".cob", ".scn", ".mdl", ".md2", ".md3",
     ".mdc", ".nff", ".off", ".ogex", ".irr", ".irrmesh", ".q3o", ".q3s", ".raw", ".ter",
-    ".hmp", ".ndo", ".pmx", ".xgl", ".zgl", ".csm", ".iqm", ".sib", ".m3d", ".mesh.xml",
+    ".hmp", ".ndo", ".pmx", ".xgl", ".zgl", ".csm", ".iqm", ".sib", ".m3d", ".mesh.xml", ".mesh",
     ".amf", ".3d", ".uc", ".dxf", ".ifc", ".stp", ".lxo",
 )
 USD_EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz")
