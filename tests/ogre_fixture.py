@@ -186,9 +186,12 @@ def _rot(tag, q):
     return f'<{tag} angle="{angle:.12g}">{_v("axis", axis)}</{tag}>'
 
 
-def write_xml(limb: Limb, folder, stem="limb", skeleton_link=None) -> str:
+def write_xml(limb: Limb, folder, stem="limb", skeleton_link=None, vertex_animation=False,
+              animation_link=False) -> str:
     """Write ``stem.mesh.xml`` and ``stem.skeleton.xml`` into ``folder``; the mesh's skeleton
-    link is ``skeleton_link`` (default ``stem.skeleton``, Ogre's usual name for the pair)."""
+    link is ``skeleton_link`` (default ``stem.skeleton``, Ogre's usual name for the pair).
+    ``vertex_animation`` adds a pose and a pose animation to the mesh; ``animation_link`` a link
+    to another skeleton's animations."""
     os.makedirs(folder, exist_ok=True)
     link = skeleton_link or f"{stem}.skeleton"
     lines = ['<mesh>', f'  <sharedgeometry vertexcount="{len(limb.positions)}">',
@@ -204,7 +207,16 @@ def write_xml(limb: Limb, folder, stem="limb", skeleton_link=None) -> str:
               '  <boneassignments>']
     for vi, b, w in limb.assignments:
         lines.append(f'    <vertexboneassignment vertexindex="{vi}" boneindex="{b}" weight="{w:.9g}"/>')
-    lines += ['  </boneassignments>', '</mesh>']
+    lines.append('  </boneassignments>')
+    if vertex_animation:
+        lines += ['  <poses>', '    <pose target="mesh" index="0" name="bulge">',
+                  '      <poseoffset index="0" x="0.1" y="0" z="0"/>', '    </pose>', '  </poses>',
+                  '  <animations>', '    <animation name="breathe" length="1">', '      <tracks>',
+                  '        <track target="mesh" type="pose">', '          <keyframes>',
+                  '            <keyframe time="0"><poseref poseindex="0" influence="0"/></keyframe>',
+                  '            <keyframe time="1"><poseref poseindex="0" influence="1"/></keyframe>',
+                  '          </keyframes>', '        </track>', '      </tracks>', '    </animation>', '  </animations>']
+    lines.append('</mesh>')
     mesh_path = os.path.join(folder, f"{stem}.mesh.xml")
     with open(mesh_path, "w") as fh:
         fh.write("\n".join(lines) + "\n")
@@ -228,7 +240,10 @@ def write_xml(limb: Limb, folder, stem="limb", skeleton_link=None) -> str:
                       '            </keyframe>']
             s += ['          </keyframes>', '        </track>']
         s += ['      </tracks>', '    </animation>']
-    s += ['  </animations>', '</skeleton>']
+    s.append('  </animations>')
+    if animation_link:
+        s += ['  <animationlinks>', '    <animationlink skeletonName="other.skeleton" scale="1"/>', '  </animationlinks>']
+    s.append('</skeleton>')
     base = link[:-len(".xml")] if link.endswith(".xml") else link
     skel_path = os.path.join(folder, os.path.basename(base) + ".xml")
     with open(skel_path, "w") as fh:
@@ -249,8 +264,9 @@ def _f(*v) -> bytes:
     return struct.pack(f"<{len(v)}f", *v)
 
 
-def write_binary(limb: Limb, folder, stem="limb", skeleton_link=None) -> str:
-    """Write ``stem.mesh`` and ``stem.skeleton`` (binary) into ``folder``."""
+def write_binary(limb: Limb, folder, stem="limb", skeleton_link=None, vertex_animation=False) -> str:
+    """Write ``stem.mesh`` and ``stem.skeleton`` (binary) into ``folder`` (``vertex_animation``:
+    a pose and a pose animation too)."""
     os.makedirs(folder, exist_ok=True)
     link = skeleton_link or f"{stem}.skeleton"
     nv = len(limb.positions)
@@ -264,6 +280,12 @@ def write_binary(limb: Limb, folder, stem="limb", skeleton_link=None) -> str:
     body = struct.pack("<?", True) + geometry + submesh + _chunk(0x6000, _str(link))
     for vi, b, w in limb.assignments:
         body += _chunk(0x7000, struct.pack("<IHf", vi, b, w))
+    if vertex_animation:  # M_POSES > M_POSE > M_POSE_VERTEX; M_ANIMATIONS > M_ANIMATION > track > pose keys
+        pose = _chunk(0xC100, _str("bulge") + struct.pack("<H?", 0, False)
+                      + _chunk(0xC111, struct.pack("<I", 0) + _f(0.1, 0.0, 0.0)))
+        body += _chunk(0xC000, pose)
+        keys = b"".join(_chunk(0xD112, _f(t) + _chunk(0xD113, struct.pack("<Hf", 0, t))) for t in (0.0, 1.0))
+        body += _chunk(0xD000, _chunk(0xD100, _str("breathe") + _f(1.0) + _chunk(0xD110, struct.pack("<2H", 2, 0) + keys)))
     mesh = struct.pack("<H", 0x1000) + _str("[MeshSerializer_v1.8]") + _chunk(0x3000, body)
     mesh_path = os.path.join(folder, f"{stem}.mesh")
     with open(mesh_path, "wb") as fh:

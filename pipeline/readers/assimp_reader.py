@@ -316,8 +316,9 @@ def read_assimp(path, meshes=None, fps=None):
         if why:
             raise InputError(path, why)
     fbx = read_global_settings(path) if ext == ".fbx" else {}
+    skeleton = None
     if ogre.is_ogre(path):  # the skeleton it names: inside its folder, and present (assimp drops a missing one)
-        ogre.check_skeleton(path)
+        skeleton = ogre.check_skeleton(path)
     scene = read_scene(path, budget, fbx)
     up, mpu, note = _source_frame(path, ext, fbx)
     mesh = build(scene, path, meshes=meshes, fps=fps, budget=budget,
@@ -339,4 +340,6 @@ def read_assimp(path, meshes=None, fps=None):
                     f"blend shapes of {', '.join(inert)} have DeformPercent 0 at rest and in every curve: "
                     "nothing of them to carry"]
         mesh.source["not_carried"] = items
+    if ogre.is_ogre(path):  # pose / morph animation, animation links: named, never dropped silently
+        mesh.source["not_carried"] = ogre.not_carried(path, skeleton)
     return mesh.replace(up_axis=up, meters_per_unit=mpu)

@@ -14,6 +14,10 @@ does not check or does not carry as Ogre plays it.
   rotation and scale.  :func:`mend_translations` puts it back: ``p + R_b^-1 (p' - p)`` for
   assimp's ``p'`` (exact where the binding scale is uniform, as Ogre exporters write it).
 * Units: Ogre has none; Y-up metres as for the other assimp formats, unless the user says.
+* **Not carried** (:func:`not_carried`, named, never dropped silently): a mesh's pose / morph
+  (vertex) animation (``M_POSES`` / ``M_ANIMATIONS``, XML ``<poses>`` / ``<animations>``), which
+  assimp does not turn into clips, and a skeleton's animation links (``SKELETON_ANIMATION_LINK``,
+  XML ``<animationlinks>``: animations borrowed from another skeleton file, which assimp skips).
 """
 
 from __future__ import annotations
@@ -28,8 +32,10 @@ from ..errors import InputError
 
 EXTENSIONS = (".mesh", ".mesh.xml")
 
-#: the binary mesh serializer's chunk ids this module reads
+#: the binary serializers' chunk ids this module reads
 _M_HEADER, _M_MESH, _M_SKELETON_LINK = 0x1000, 0x3000, 0x6000
+_M_POSES, _M_ANIMATIONS = 0xC000, 0xD000
+_SKELETON_ANIMATION_LINK = 0x5000
 
 
 def is_ogre(path) -> bool:
@@ -119,3 +125,85 @@ def mend_translations(local, channels_by_anim) -> None:
             m = bind[:3, :3]
             p = bind[:3, 3]
             ch.values[:] = p + (ch.values - p) @ np.linalg.inv(m).T
+
+
+# ------------------------------------------------------------------------------ not carried
+def _chunks(data: bytes, start: int, end: int):
+    """``[(id, body start, chunk end)]`` of the chunks laid end to end in ``data[start:end]``;
+    None when their lengths do not tile it (a file whose chunks cannot be walked)."""
+    out = []
+    i = start
+    while i < end:
+        if i + 6 > end:
+            return None
+        cid, length = struct.unpack_from("<HI", data, i)
+        if length < 6 or i + length > end:
+            return None
+        out.append((cid, i + 6, i + length))
+        i += length
+    return out
+
+
+def _binary_mesh_parts(data: bytes):
+    """The chunk ids directly inside ``M_MESH``; None when the chunks cannot be walked."""
+    head = data.find(b"\n", 2)
+    if head < 0:
+        return None
+    top = _chunks(data, head + 1, len(data))
+    if top is None:
+        return None
+    ids = set()
+    for cid, body, end in top:
+        if cid == _M_MESH:
+            inner = _chunks(data, body + 1, end)  # after the bool "skeletally animated"
+            if inner is None:
+                return None
+            ids |= {c for c, _, _ in inner}
+    return ids
+
+
+def _binary_skeleton_parts(data: bytes):
+    head = data.find(b"\n", 2)
+    top = _chunks(data, head + 1, len(data)) if head >= 0 else None
+    return None if top is None else {c for c, _, _ in top}
+
+
+def not_carried(path, skeleton) -> list:
+    """The :mod:`pipeline.notcarried` records of an Ogre mesh (and its skeleton file, when it has
+    one) for what assimp does not carry; see the module docstring."""
+    from .. import notcarried
+
+    p = os.fspath(path)
+    name = os.path.basename(p)
+    out = []
+    vertex_anim = skel_links = None
+    try:
+        if p.lower().endswith(".xml"):
+            tags = {el.tag for _, el in ET.iterparse(p, events=("start",))}
+            vertex_anim = bool({"pose", "animation"} & tags)
+        else:
+            with open(p, "rb") as fh:
+                parts = _binary_mesh_parts(fh.read())
+            vertex_anim = None if parts is None else bool({_M_POSES, _M_ANIMATIONS} & parts)
+        if skeleton:
+            if skeleton.lower().endswith(".xml"):
+                skel_links = "animationlink" in {el.tag for _, el in ET.iterparse(skeleton, events=("start",))}
+            else:
+                with open(skeleton, "rb") as fh:
+                    parts = _binary_skeleton_parts(fh.read())
+                skel_links = None if parts is None else _SKELETON_ANIMATION_LINK in parts
+        else:
+            skel_links = False
+    except (OSError, ET.ParseError):
+        pass  # assimp has read the files: what could not be checked is said below
+    if vertex_anim or vertex_anim is None:
+        out.append(notcarried.item(
+            "ogre_vertex_animation", [name],
+            "pose / morph (vertex) animation of the mesh is not read (assimp makes no clip of it)" if vertex_anim else
+            "its chunks could not be walked to check for pose / morph (vertex) animation, which is not read"))
+    if skel_links or skel_links is None:
+        out.append(notcarried.item(
+            "ogre_animation_link", [os.path.basename(skeleton or "")],
+            "the skeleton links animations from another skeleton file, which are not read" if skel_links else
+            "its skeleton's chunks could not be walked to check for animation links, which are not read"))
+    return out

@@ -176,3 +176,32 @@ def test_a_truncated_binary_mesh_is_refused_in_one_line(tmp_path, limb):
         lines = run.stderr.strip().splitlines()
         assert run.returncode == 1 and len(lines) == 1 and "Traceback" not in run.stderr, run.stderr
         assert name in lines[0]
+
+
+# ------------------------------------------------------------------------------ not carried
+@pytest.mark.parametrize("kind", list(WRITERS))
+def test_ogre_vertex_animation_is_named_and_strict_refuses_it(tmp_path, limb, kind):
+    """Pose / morph animation, which assimp makes no clip of, is named (never dropped silently);
+    the plain pair names nothing."""
+    import json
+
+    src = WRITERS[kind](limb, tmp_path / "v", vertex_animation=True)
+    run = _cli("import", src, "-o", tmp_path / "v.usda", "--json")
+    assert run.returncode == 0, run.stderr
+    items = json.loads(run.stdout)["not_carried"]
+    assert [(x["what"], x["where"]) for x in items] == [("ogre_vertex_animation", [os.path.basename(src)])]
+    strict = _cli("import", src, "-o", tmp_path / "s.usda", "--strict")
+    lines = strict.stderr.strip().splitlines()
+    assert strict.returncode == 1 and len(lines) == 1 and "ogre_vertex_animation" in lines[0], strict.stderr
+    plain = WRITERS[kind](limb, tmp_path / "p")
+    run = _cli("import", plain, "-o", tmp_path / "p.usda", "--json")
+    assert run.returncode == 0 and json.loads(run.stdout)["not_carried"] == []
+
+
+def test_ogre_animation_links_are_named(tmp_path, limb):
+    import json
+
+    src = ogre_fixture.write_xml(limb, tmp_path, animation_link=True)
+    run = _cli("import", src, "-o", tmp_path / "l.usda", "--json")
+    assert run.returncode == 0, run.stderr
+    assert [x["what"] for x in json.loads(run.stdout)["not_carried"]] == ["ogre_animation_link"]
