@@ -51,6 +51,9 @@ def reader_for(path):
     for ext in sorted(READERS, key=len, reverse=True):
         if name.endswith(ext):
             return READERS[ext]
+    if name.endswith((".skeleton", ".skeleton.xml")):
+        raise InputError(path, "an Ogre skeleton holds no mesh: import the .mesh (or .mesh.xml) that links it; "
+                               "its skeleton is read from beside it")
     raise InputError(path, f"unsupported file type {os.path.splitext(name)[1] or '(no extension)'!r}; "
                      f"supported: {' '.join(USD_EXTENSIONS)} through usd-core, and {len(ASSIMP_EXTENSIONS)} "
                      f"through assimp ({' '.join(ASSIMP_EXTENSIONS[:4])} ... {ASSIMP_EXTENSIONS[-1]})")

@@ -205,3 +205,20 @@ def test_ogre_animation_links_are_named(tmp_path, limb):
     run = _cli("import", src, "-o", tmp_path / "l.usda", "--json")
     assert run.returncode == 0, run.stderr
     assert [x["what"] for x in json.loads(run.stdout)["not_carried"]] == ["ogre_animation_link"]
+
+
+def test_a_skeleton_alone_or_an_old_serializer_is_refused_in_one_line(tmp_path, limb):
+    """A ``.skeleton`` given alone says which file to import; a binary mesh of a serializer
+    assimp does not read (anything but ``[MeshSerializer_v1.8]``) is refused naming the version."""
+    src = ogre_fixture.write_binary(limb, tmp_path / "b")
+    xml = ogre_fixture.write_xml(limb, tmp_path / "x")
+    old = tmp_path / "b" / "old.mesh"
+    old.write_bytes(open(src, "rb").read().replace(b"[MeshSerializer_v1.8]", b"[MeshSerializer_v1.41]", 1))
+    for p, needles in ((tmp_path / "b" / "limb.skeleton", ("Ogre skeleton", ".mesh")),
+                       (tmp_path / "x" / "limb.skeleton.xml", ("Ogre skeleton", ".mesh.xml")),
+                       (old, ("MeshSerializer_v1.41",))):
+        run = _cli("import", p, "-o", tmp_path / "a.usda")
+        lines = run.stderr.strip().splitlines()
+        assert run.returncode == 1 and len(lines) == 1 and "Traceback" not in run.stderr, run.stderr
+        assert os.path.basename(p) in lines[0] and all(n in lines[0] for n in needles), lines[0]
+    assert os.path.isfile(xml)
