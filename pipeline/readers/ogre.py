@@ -36,6 +36,9 @@ EXTENSIONS = (".mesh", ".mesh.xml")
 _M_HEADER, _M_MESH, _M_SKELETON_LINK = 0x1000, 0x3000, 0x6000
 _M_POSES, _M_ANIMATIONS = 0xC000, 0xD000
 _SKELETON_ANIMATION_LINK = 0x5000
+#: the chunk ids ``M_MESH`` may hold (geometry, submeshes, skeleton link, bone assignments, LOD,
+#: bounds, submesh names, edge lists, poses, animations, extremes)
+_MESH_CHUNKS = {0x4000, 0x5000, 0x6000, 0x7000, 0x8000, 0x9000, 0xA000, 0xB000, 0xC000, 0xD000, 0xE000}
 
 
 def is_ogre(path) -> bool:
@@ -63,19 +66,29 @@ def _xml_links(path) -> list:
 
 def _binary_links(path) -> list:
     """Every ``M_MESH_SKELETON_LINK`` chunk's name.  The chunks of ``M_MESH`` are walked by their
-    lengths; a file whose lengths do not add up is scanned for the chunk id instead (assimp reads
-    the chunks in order and ignores most lengths), so no link a reader could follow is missed."""
+    lengths; in a file whose lengths do not add up (assimp reads the chunks in order and ignores
+    most lengths) the bytes are scanned for the chunk id instead, so no link a reader could follow
+    is missed."""
     with open(path, "rb") as fh:
         data = fh.read()
     if len(data) < 2 or struct.unpack_from("<H", data)[0] != _M_HEADER:
         raise InputError(path, "not an Ogre binary mesh (no serializer header chunk)")
+    walked = _mesh_subchunks(data)
+    if walked is not None:
+        out = []
+        for cid, body, end in walked:
+            if cid == _M_SKELETON_LINK:
+                nl = data.find(b"\n", body, end)
+                out.append(data[body:nl if nl >= 0 else end].decode("utf-8", "replace"))
+        return list(dict.fromkeys(out))
     links = []
     i = 0
-    while i + 6 <= len(data):
-        j = data.find(struct.pack("<H", _M_SKELETON_LINK), i)
+    tag = struct.pack("<H", _M_SKELETON_LINK)
+    while True:
+        j = data.find(tag, i)
         if j < 0 or j + 6 > len(data):
             break
-        end = data.find(b"\n", j + 6)
+        end = data.find(b"\n", j + 6, j + 6 + 4096)  # a bounded look: never quadratic
         if end > j + 6:
             raw = data[j + 6:end]
             length = struct.unpack_from("<I", data, j + 2)[0]
@@ -144,28 +157,38 @@ def _chunks(data: bytes, start: int, end: int):
     return out
 
 
-def _binary_mesh_parts(data: bytes):
-    """The chunk ids directly inside ``M_MESH``; None when the chunks cannot be walked."""
-    head = data.find(b"\n", 2)
+def _mesh_subchunks(data: bytes):
+    """``[(id, body start, end)]`` of the chunks directly inside ``M_MESH``; None when the
+    chunks cannot be walked."""
+    head = data.find(b"\n", 2, 2 + 256)
     if head < 0:
         return None
     top = _chunks(data, head + 1, len(data))
     if top is None:
         return None
-    ids = set()
+    if not top or any(cid != _M_MESH for cid, _, _ in top):
+        return None
+    out = []
     for cid, body, end in top:
-        if cid == _M_MESH:
-            inner = _chunks(data, body + 1, end)  # after the bool "skeletally animated"
-            if inner is None:
-                return None
-            ids |= {c for c, _, _ in inner}
-    return ids
+        inner = _chunks(data, body + 1, end)  # after the bool "skeletally animated"
+        if inner is None or any(c not in _MESH_CHUNKS for c, _, _ in inner):
+            return None
+        out += inner
+    return out
+
+
+def _binary_mesh_parts(data: bytes):
+    """The chunk ids directly inside ``M_MESH``; None when the chunks cannot be walked."""
+    inner = _mesh_subchunks(data)
+    return None if inner is None else {c for c, _, _ in inner}
 
 
 def _binary_skeleton_parts(data: bytes):
-    head = data.find(b"\n", 2)
+    head = data.find(b"\n", 2, 2 + 256)
     top = _chunks(data, head + 1, len(data)) if head >= 0 else None
-    return None if top is None else {c for c, _, _ in top}
+    if top is None or any(c not in (0x1010, 0x2000, 0x3000, 0x4000, _SKELETON_ANIMATION_LINK) for c, _, _ in top):
+        return None
+    return {c for c, _, _ in top}
 
 
 def not_carried(path, skeleton) -> list:

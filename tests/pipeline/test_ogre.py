@@ -222,3 +222,24 @@ def test_a_skeleton_alone_or_an_old_serializer_is_refused_in_one_line(tmp_path, 
         assert run.returncode == 1 and len(lines) == 1 and "Traceback" not in run.stderr, run.stderr
         assert os.path.basename(p) in lines[0] and all(n in lines[0] for n in needles), lines[0]
     assert os.path.isfile(xml)
+
+
+def test_binary_chunks_that_do_not_add_up_still_show_their_skeleton_link(tmp_path, limb):
+    """A binary mesh whose chunk lengths are wrong (assimp ignores most of them) is scanned for
+    its skeleton link, so the folder rule still applies; what cannot be walked is named."""
+    import struct
+
+    from colossus.pipeline.readers import ogre
+
+    src = ogre_fixture.write_binary(limb, tmp_path)
+    assert ogre.skeleton_links(src) == ["limb.skeleton"]
+    data = bytearray(open(src, "rb").read())
+    head = data.index(b"\n") + 1
+    assert struct.unpack_from("<H", data, head)[0] == 0x3000
+    struct.pack_into("<I", data, head + 2, 7)  # M_MESH's length: wrong
+    bad = tmp_path / "bad.mesh"
+    bad.write_bytes(bytes(data))
+    assert ogre.skeleton_links(bad) == ["limb.skeleton"]
+    items = ogre.not_carried(bad, str(tmp_path / "limb.skeleton"))
+    assert [x["what"] for x in items] == ["ogre_vertex_animation"] and "could not be walked" in items[0]["detail"]
+    assert ogre.not_carried(src, str(tmp_path / "limb.skeleton")) == []
