@@ -91,9 +91,10 @@ class Limb:
     def local(self, b, anim=None, seconds=0.0):
         p, q, s = self.position[b].copy(), self.rotation[b].copy(), self.scale[b].copy()
         if anim is not None:
-            keys = self.animations[anim][1].get(b)
+            length, tracks = self.animations[anim]
+            keys = tracks.get(b)
             if keys:
-                t, r, k = _sample(keys, seconds)
+                t, r, k = _sample(keys, seconds, length)
                 p, q, s = p + t, qmul(q, r), s * k
         return trs(p, q, s)
 
@@ -116,20 +117,28 @@ class Limb:
         return v / tot[:, None]
 
     def key_times(self, anim):
-        return np.unique(np.concatenate([[k.time for k in ks] for ks in self.animations[anim][1].values()]))
+        """Every key time of the animation, and its length (where Ogre's clip ends)."""
+        length, tracks = self.animations[anim]
+        return np.unique(np.concatenate([[k.time for k in ks] for ks in tracks.values()] + [[length]]))
 
 
-def _sample(keys, t):
+def _sample(keys, t, length):
+    """A track at ``t`` seconds as Ogre samples it: the first key held before it; after the last
+    key, interpolated towards the first key placed at ``length + first time`` (Ogre wraps)."""
     times = np.array([k.time for k in keys])
-    if t <= times[0]:
+    if t <= times[0] or len(keys) == 1:
         k = keys[0]
         return k.translate, k.rotate, k.scale
     if t >= times[-1]:
-        k = keys[-1]
-        return k.translate, k.rotate, k.scale
-    i = int(np.searchsorted(times, t, side="right")) - 1
-    a, b = keys[i], keys[i + 1]
-    u = (t - a.time) / (b.time - a.time)
+        a, b = keys[-1], keys[0]
+        t0, t1 = times[-1], length + times[0]
+        if t1 <= t0:
+            return a.translate, a.rotate, a.scale
+    else:
+        i = int(np.searchsorted(times, t, side="right")) - 1
+        a, b = keys[i], keys[i + 1]
+        t0, t1 = a.time, b.time
+    u = (t - t0) / (t1 - t0)
     rb = b.rotate if np.dot(a.rotate, b.rotate) >= 0 else -b.rotate  # shortest path
     r = (1 - u) * a.rotate + u * rb
     return (1 - u) * a.translate + u * b.translate, r / np.linalg.norm(r), (1 - u) * a.scale + u * b.scale
@@ -138,8 +147,9 @@ def _sample(keys, t):
 def make_limb(around=12, rings=9, length=3.0, radius=0.35) -> Limb:
     """A capped tube along +Y skinned to root -> upper -> lower -> hand, with two animations:
     ``bend`` (every bone keyed every 0.2 s: the root slides, the upper arm bends and slides
-    along its own rotated axes, the forearm bends and twists) and ``wave`` (the forearm alone,
-    keyed every 0.4 s; the hand on another grid)."""
+    along its own rotated axes, the forearm bends and twists) and ``wave`` (the forearm keyed every 0.4 s to the
+    length, 1.6 s; the hand's track ends at 0.8 s, so Ogre swings it back towards its first key
+    over the rest of the length)."""
     pos, tris = tube_geometry(around, rings, length, radius)
     names = ["root", "upper", "lower", "hand"]
     parents = [-1, 0, 1, 2]
@@ -169,7 +179,7 @@ def make_limb(around=12, rings=9, length=3.0, radius=0.35) -> Limb:
     }
     wave = {
         2: [Key(t, zero, quat((0, 0, 1), 30 * np.sin(np.pi * t / 1.6)), one) for t in (0.0, 0.4, 0.8, 1.2, 1.6)],
-        3: [Key(t, zero, quat((1, 0, 0), 20 * t), one) for t in (0.0, 0.8, 1.6)],
+        3: [Key(t, zero, quat((1, 0, 0), 25 * t), one) for t in (0.0, 0.4, 0.8)],  # ends before the length
     }
     limb.animations = {"bend": (1.2, bend), "wave": (1.6, wave)}
     return limb

@@ -218,6 +218,10 @@ def read_scene(path, budget, fbx) -> Scene:
                     v = v / nrm[:, None]
                 chans.append(Channel(node, path_, t / tps + shift, v, "NLERP" if is_ogre else "LINEAR"))
         name = a.name
+        if is_ogre and float(a.duration or 0.0) > 0.0:  # Ogre plays a track's gap to the length as a wrap
+            length = float(a.duration) / tps
+            chans = ogre.wrap_to_length(chans, length)
+            span = (0.0, length)
         if dae_clips and len(dae_clips) == len(scene.animations) and a.name == f"combinedAnim_{ai}":
             # assimp's name for the i-th <animation_clip>: the file's name and window instead
             name, lo, hi = dae_clips[ai]

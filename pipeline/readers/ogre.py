@@ -13,6 +13,10 @@ does not check or does not carry as Ogre plays it.
   assimp composes ``binding * key`` as matrices, which turns the translation by the bone's binding
   rotation and scale.  :func:`mend_translations` puts it back: ``p + R_b^-1 (p' - p)`` for
   assimp's ``p'`` (exact where the binding scale is uniform, as Ogre exporters write it).
+* **Animation length.** Ogre plays an animation from 0 to its ``length``; a track whose last key
+  comes before the length is interpolated from that key towards its first key, placed at
+  ``length + first key time`` (``AnimationTrack::getKeyFramesAtTime`` wraps).  assimp keeps only
+  the keys: :func:`wrap_to_length` adds that key, and the clip spans ``0 .. length``.
 * Units: Ogre has none; Y-up metres as for the other assimp formats, unless the user says.
 * **Not carried** (:func:`not_carried`, named, never dropped silently): a mesh's pose / morph
   (vertex) animation (``M_POSES`` / ``M_ANIMATIONS``, XML ``<poses>`` / ``<animations>``), which
@@ -122,6 +126,24 @@ def check_skeleton(path) -> str | None:
             raise InputError(p, f"its skeleton {' or '.join(repr(n) for n in names)} is not in its folder "
                              "(an Ogre mesh's skeleton is the file its skeleton link names, beside it)")
     return found
+
+
+def wrap_to_length(channels, length: float) -> list:
+    """The channels as Ogre plays them over ``0 .. length``: a channel whose last key comes
+    before ``length`` gets its first key's value again at ``length + first key time`` (Ogre
+    interpolates the gap towards the first key, wrapping; see the module docstring)."""
+    from .scene import Channel
+
+    out = []
+    eps = 1e-6 * max(1.0, abs(length))
+    for ch in channels:
+        t = np.asarray(ch.times, dtype=np.float64)
+        if len(t) > 1 and t[-1] < length - eps:
+            v = np.asarray(ch.values)
+            ch = Channel(ch.node, ch.path, np.r_[t, length + t[0]], np.concatenate([v, v[:1]]), ch.interpolation,
+                         ch.static)
+        out.append(ch)
+    return out
 
 
 def mend_translations(local, channels_by_anim) -> None:
