@@ -101,6 +101,23 @@ def _count_spheres_intervals(into: dict):
         certify.continuous = orig
 
 
+@contextmanager
+def reference_paths():
+    """Run the proof and the spheres stage on the reference paths the compiled ones replaced (issue
+    22 items 2-3): the continuous certificate's levels B and C one numpy call per node
+    (``certify.BATCHED = False``) and the sampled proof's exact tier skinning every vertex of a part
+    (``certify.CHUNKED = False``, also the default for now): the "before" of the rows, in the same
+    process, same results."""
+    from colossus.runtime import certify
+
+    old = certify.BATCHED, certify.CHUNKED
+    certify.BATCHED, certify.CHUNKED = False, False
+    try:
+        yield
+    finally:
+        certify.BATCHED, certify.CHUNKED = old
+
+
 @dataclass
 class Character:
     """One imported corpus character (or the tiled copy)."""
@@ -118,6 +135,10 @@ class Character:
     parts: int = 0
     clips: int = 0
     frames: int = 0
+    ref_wall: float = 0.0          # the import again on the reference paths (:func:`reference_paths`)
+    ref_cpu: float = 0.0
+    ref_spheres: float = 0.0
+    ref_same: bool = True
     only_clip: str | None = None   # the tiled copy: prove / pose this clip alone
     note: str = ""
     error: str = ""
@@ -169,6 +190,13 @@ class Characters:
                 continue
             ch.import_wall, ch.import_cpu = time.perf_counter() - t0, _cpu() - c0
             ch.stages = {r.stage: r.seconds for r in res.reports}
+            c0, t0 = _cpu(), time.perf_counter()
+            with reference_paths():
+                ref = import_asset(src, out + ".ref.usda")
+            ch.ref_wall, ch.ref_cpu = time.perf_counter() - t0, _cpu() - c0
+            ch.ref_spheres = {r.stage: r.seconds for r in ref.reports}.get("spheres", 0.0)
+            with open(out, "rb") as f1, open(out + ".ref.usda", "rb") as f2:
+                ch.ref_same = f1.read() == f2.read()
             ch.spheres_intervals = counts
             self._describe(ch)
             self.items.append(ch)
@@ -262,6 +290,11 @@ def format_import_rows(items) -> str:
         lines.append(f"  {c.name:<40} {c.vertices:>6} verts {c.parts:>3} parts {c.clips:>3} clips {c.frames:>5} frames: "
                      f"total {c.import_wall:7.2f} s wall, {c.import_cpu:7.2f} s CPU; spheres stage {sp:7.2f} s "
                      f"({sp / max(c.stages.get('total', c.import_wall), 1e-9):.0%}) [{intervals_text(c.spheres_intervals)}]")
+        if c.ref_cpu:
+            lines.append(f"  {'':<40} before (reference paths, this process): {c.ref_wall:7.2f} s wall, {c.ref_cpu:7.2f} s CPU, "
+                         f"spheres {c.ref_spheres:7.2f} s; now {c.ref_cpu / max(c.import_cpu, 1e-9):.2f}x faster (CPU), "
+                         f"spheres {c.ref_spheres / max(sp, 1e-9):.2f}x; "
+                         f"{'the same asset' if c.ref_same else 'ASSETS DIFFER'}")
     return "\n".join(lines)
 
 
@@ -308,6 +341,14 @@ def validate_row(ch: Character, repeat: int = 2) -> dict:
         proof = prove(a, clips=clips)
         t_cont = min(t_cont, proof.continuous_seconds)
         t_sampled = min(t_sampled, proof.seconds - proof.continuous_seconds)
+    ref_sampled = ref_cont = np.inf
+    with reference_paths():  # the "before": the same proof on the reference paths, same process
+        for _ in range(repeat):
+            ref = prove(a, clips=clips)
+            ref_cont = min(ref_cont, ref.continuous_seconds)
+            ref_sampled = min(ref_sampled, ref.seconds - ref.continuous_seconds)
+    same = (ref.tiers == proof.tiers and ref.intervals == proof.intervals and ref.between == proof.between
+            and [r.vertex for r in ref.results] == [r.vertex for r in proof.results])
     xs = []
     t_joints = 0.0  # what the proof spends reading joint transforms (UsdSkel.AnimQuery), timed apart
     for c in a.clips:
@@ -326,7 +367,10 @@ def validate_row(ch: Character, repeat: int = 2) -> dict:
             "sampled_no_read_vs_lbs": par / max(t_sampled - t_joints, 1e-9), "lbs_parallel_s": par, "lbs_serial_s": ser,
             "tiers": dict(proof.tiers), "intervals": dict(proof.intervals), "passed": passed,
             "sampled_vs_lbs": par / t_sampled, "continuous_over_sampled": t_cont / t_sampled,
-            "whole_vs_lbs": par / (t_read + t_sampled + t_cont)}
+            "whole_vs_lbs": par / (t_read + t_sampled + t_cont), "ref_sampled_s": ref_sampled,
+            "ref_continuous_s": ref_cont, "ref_same": same, "ref_sampled_vs_lbs": par / ref_sampled,
+            "ref_continuous_over_sampled": ref_cont / ref_sampled,
+            "ref_whole_vs_lbs": par / (t_read + ref_sampled + ref_cont)}
 
 
 def _s(sec: float) -> str:
@@ -350,7 +394,13 @@ def format_validate_rows(rows) -> str:
                   f"    continuous cert.  {_s(r['continuous_s']):>10} = {r['continuous_over_sampled']:6.2f}x the sampled "
                   f"proof   [{intervals_text(r['intervals'])}]",
                   f"    whole proof (read {_s(r['read_s'])} + sampled + continuous) = {r['whole_vs_lbs']:6.2f}x "
-                  "the speed of SkinPointsLBS"]
+                  "the speed of SkinPointsLBS",
+                  f"    before (reference paths, this process): sampled {_s(r['ref_sampled_s'])} = "
+                  f"{r['ref_sampled_vs_lbs']:.2f}x SkinPointsLBS, continuous {_s(r['ref_continuous_s'])} = "
+                  f"{r['ref_continuous_over_sampled']:.2f}x its sampled proof, whole {r['ref_whole_vs_lbs']:.2f}x; now "
+                  f"sampled {r['ref_sampled_s'] / max(r['sampled_s'], 1e-12):.2f}x and continuous "
+                  f"{r['ref_continuous_s'] / max(r['continuous_s'], 1e-12):.2f}x faster; "
+                  f"{'same results' if r['ref_same'] else 'RESULTS DIFFER'}"]
     return "\n".join(lines)
 
 

@@ -10,7 +10,9 @@ same run and on the same data:
 * ``continuous``: the certificate for every time between frames
   (:func:`runtime.certify.continuous`), as a ratio of the sampled proof;
 * ``usd_lbs_serial`` / ``usd_lbs_parallel``: ``UsdSkel.SkinPointsLBS`` skinning alone (usd-core's
-  C++), one call per frame, ``inSerial=True`` (its default) and ``False``.
+  C++), one call per frame, ``inSerial=True`` (its default) and ``False``;
+* ``dqs``: the same rig skinned by dual quaternions (:func:`dqs_case`): the sampled proof, the
+  continuous certificate (:mod:`runtime.certify_dq`) and ``UsdSkel.SkinPoints(dualQuaternion)``.
 
 Joint transforms are given (the USD reading of clips, ``UsdSkel.AnimQuery``, is not part of
 either side).  Numba compilation is done before timing.
@@ -26,6 +28,11 @@ import numpy as np
 from colossus.runtime import schema
 
 from colossus.validators import frameproof as fp
+
+
+#: Frames of the dual-quaternion row (its continuous certificate subdivides: fewer frames keep the
+#: bench's run time).
+DQS_FRAMES = 100
 
 
 def synthetic_rig(n=20000, b=40, k=4, frames=500, seed=0):
@@ -121,6 +128,64 @@ def _usd_lbs(r, serial):
     return time.perf_counter() - t0
 
 
+def _usd_dqs(r, serial, frames):
+    """``UsdSkel.SkinPoints(dualQuaternion)`` of the first ``frames`` frames: seconds."""
+    from pxr import Gf, UsdSkel, Vt
+    inv_bind = np.linalg.inv(r["bind"])
+    ji = Vt.IntArray.FromNumpy(r["jidx"].ravel())
+    jw = Vt.FloatArray.FromNumpy(r["jw"].ravel())
+    k = r["jidx"].shape[1]
+    gb = Gf.Matrix4d(1)
+    xforms = schema.row_vector(r["skel"][:frames] @ inv_bind)
+    src = Vt.Vec3fArray.FromNumpy(r["points"])
+    t0 = time.perf_counter()
+    for f in range(len(xforms)):
+        p = Vt.Vec3fArray(src)
+        UsdSkel.SkinPoints(UsdSkel.Tokens.dualQuaternion, gb, Vt.Matrix4dArray.FromNumpy(xforms[f]), ji, jw, k, p, serial)
+    return time.perf_counter() - t0
+
+
+def dqs_case(r, frames, chunk, repeat, pad=0.05) -> dict:
+    """The proof of the synthetic rig skinned by dual quaternions (its first ``frames`` frames,
+    spheres ``pad`` over the exact farthest DQS vertex of every frame): the sampled proof (every
+    part skinned exactly: tests K and D bound linear blends only), the continuous certificate
+    (:mod:`runtime.certify_dq`), and ``UsdSkel.SkinPoints(dualQuaternion)`` on the same frames."""
+    import dataclasses
+
+    from colossus.runtime.certify import sampled
+    from colossus.runtime.certify_dq import certificate
+    from colossus.runtime.schema import Clip
+
+    rig, clip = rig_of(r)
+    rig = dataclasses.replace(rig, skinning_method="dualQuaternion", bounds=None)
+    skel = r["skel"][:frames]
+    far = np.zeros(rig.P)
+    for lo in range(0, frames, chunk):
+        far = np.maximum(far, sampled(rig, skel[lo:lo + chunk], 0.0, 0.0).dist.max(0))
+    rig = dataclasses.replace(rig, part_radii=far * (1 + pad), bounds=None)
+    sub = Clip(clip.name, clip.path, clip.tt[:frames], clip.vt[:frames], clip.tr[:frames], clip.vr[:frames],
+               clip.ts[:frames], clip.vs[:frames], clip.anim_to_skel, clip.times[:frames])
+    t_proof = t_cont = np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        bound = np.empty((frames, rig.P))
+        ok = np.empty((frames, rig.P), bool)
+        for lo in range(0, frames, chunk):
+            s = sampled(rig, skel[lo:lo + chunk], 1e-6, 1e-5)
+            bound[lo:lo + chunk] = s.bound
+            ok[lo:lo + chunk] = ~(s.bound > s.spheres[..., 3] * (1 + 1e-5) + 1e-6)
+        t_proof = min(t_proof, time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        c = certificate(rig, sub, sub.times, bound, ok, 1e-6, 1e-5)
+        t_cont = min(t_cont, time.perf_counter() - t0)
+    t_ser = min(_usd_dqs(r, True, frames) for _ in range(repeat))
+    t_par = min(_usd_dqs(r, False, frames) for _ in range(repeat))
+    return {"frames": frames, "pad": pad, "proof_seconds": t_proof, "continuous_seconds": t_cont,
+            "usd_dqs_serial_seconds": t_ser, "usd_dqs_parallel_seconds": t_par, "passed": bool(ok.all()),
+            "intervals": np.bincount(c.status.ravel().astype(np.int64), minlength=6).tolist(),
+            "certified": bool(((c.status == 1) | (c.status == 2)).all())}
+
+
 def _case(r, rig, clip, chunk, repeat):
     out = {}
     t_proof, t_cont = np.inf, np.inf
@@ -163,6 +228,9 @@ def run_bench(n=20000, joints=40, influences=4, frames=500, repeat=5) -> dict:
     tight = _case(r, trig, tclip, chunk, repeat)
     t_ser = min(_usd_lbs(r, True) for _ in range(repeat))
     t_par = min(_usd_lbs(r, False) for _ in range(repeat))
+    dq_small = dqs_case(small, 3, chunk, 1)  # compile / load the cache outside timing
+    dqs = dqs_case(r, min(frames, DQS_FRAMES), chunk, repeat)
+    del dq_small
     import numba
     return {
         "vertices": n, "joints": joints, "influences": influences, "frames": frames,
@@ -175,6 +243,7 @@ def run_bench(n=20000, joints=40, influences=4, frames=500, repeat=5) -> dict:
         "tight_speedup_vs_usd_parallel": t_par / tight["proof_seconds"],
         "continuous_over_sampled": loose["continuous_seconds"] / loose["proof_seconds"],
         "tight_continuous_over_sampled": tight["continuous_seconds"] / tight["proof_seconds"],
+        "dqs": dqs,
     }
 
 
@@ -209,6 +278,20 @@ def format_bench(res: dict) -> str:
                   f"{c['continuous_seconds'] / c['proof_seconds']:.2f}x the sampled proof (goal <= 2x); (part, interval) "
                   f"pairs: {_shares(c['intervals'], ('chord', 'vertex chord', 'subdivided', 'failed', 'undecided', 'not checked'))}; "
                   f"{'certified' if c['certified'] else 'NOT certified'}"]
+    d = res.get("dqs")
+    if d:
+        vf = res["vertices"] * d["frames"] / 1e6
+        lines += [f"  dual-quaternion skinning (the same rig, first {d['frames']} frames, spheres {d['pad']:.0%} over the "
+                  f"farthest DQS vertex):",
+                  f"    UsdSkel.SkinPoints(dualQuaternion) serial {d['usd_dqs_serial_seconds']:.3f} s "
+                  f"({vf / d['usd_dqs_serial_seconds']:.1f} M vertex-frames/s), parallel {d['usd_dqs_parallel_seconds']:.3f} s",
+                  f"    sampled proof (every part skinned exactly): {d['proof_seconds']:.3f} s = "
+                  f"{d['usd_dqs_parallel_seconds'] / d['proof_seconds']:.2f}x the speed of SkinPoints parallel; "
+                  f"verdict {'PASS' if d['passed'] else 'FAIL'}",
+                  f"    continuous certificate (Lipschitz + subdivision): {d['continuous_seconds']:.3f} s = "
+                  f"{d['continuous_seconds'] / d['proof_seconds']:.2f}x the sampled proof; (part, interval) pairs: "
+                  f"{_shares(d['intervals'], ('-', 'whole interval', 'subdivided', 'failed', 'undecided', 'not checked'))}; "
+                  f"{'certified' if d['certified'] else 'NOT certified'}"]
     return "\n".join(lines)
 
 

@@ -54,12 +54,15 @@ def _build_unit(src, out, settings, strict, stamp):
     from colossus.pipeline.run import import_asset
     from colossus.runtime import usdlog
 
+    from .import_ import error_rules
+
     usdlog.silence()
     usdlog.take()
     t0 = time.perf_counter()
     try:
         os.makedirs(os.path.dirname(out) or ".", exist_ok=True)
-        import_asset(src, out, settings, strict=strict, build=stamp)
+        # the error rules on the written file before its rename, as `colossus import` runs them
+        import_asset(src, out, settings, strict=strict, build=stamp, check=error_rules)
     except ColossusError as e:
         return {"ok": False, "error": one_line(e)}
     except OSError as e:

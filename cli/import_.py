@@ -14,6 +14,36 @@ from colossus.pipeline.tolerances import PARTS_ANY_THRESHOLD
 
 LARGE_INPUT_BYTES = 4 * 2**20  # show a progress bar from this input size on (when stderr is a terminal)
 
+#: Error rules the import does not rerun on the asset it writes: the frame proof (COL403 holds on
+#: all frames, COL407 holds between frames), the most expensive checks, which the ``spheres``
+#: stage has already made on the clips exactly as stored, with the same certificate
+#: (``runtime.certify.continuous``); and the ``--source`` family (COL6xx), which needs the source.
+NOT_RERUN = ("COL403", "COL407", "COL6")
+
+
+def error_rules(path, settings) -> str | None:
+    """The validator's error rules on the asset ``import`` has just written to the temporary file
+    ``path``, before its rename (``pipeline.run.import_asset``'s ``check``), with the options the
+    import's ``settings`` imply (``--max-influences`` for COL301, ``--max-deviation`` for COL701, as
+    ``colossus validate`` takes them): None when none fails, else ``"<code>: <message>"`` of the
+    first error finding (``(+N more)`` when there are others), which refuses the import.  Every
+    error-severity rule runs but :data:`NOT_RERUN`: the structure (COL0xx, COL1xx), mesh
+    (COL201-COL204, COL208, COL209), skin (COL3xx), parts (COL401, COL402, COL405), animation
+    (COL5xx) and proxy (COL701) errors.  A module-level function, so that a batch import's worker
+    processes receive it by name."""
+    from colossus.validators.registry import all_rules
+    from colossus.validators.runner import check_asset
+
+    codes = [r.code for r in all_rules() if r.severity == "error" and not r.code.startswith(NOT_RERUN)]
+    report = check_asset(path, select=codes, max_influences=settings.max_influences,
+                         max_deviation=settings.max_deviation or None)
+    errors = [f for f in report.findings if f.severity == "error"]
+    if not errors:
+        return None
+    first = errors[0]
+    more = f" (+{len(errors) - 1} more)" if len(errors) > 1 else ""
+    return f"{first.code}: {first.message}{more}"
+
 
 def _num(value, spec: str) -> str:
     """``format(value, spec)``, or ``n/a`` for a figure a degenerate input leaves undefined
@@ -36,6 +66,11 @@ def _stage_line(rep) -> str:
                 f"{c['meters_per_unit']:g} m/unit (x{c['scale_applied']:g})")
     if s == "weld":
         return f"{c['vertices_in']} -> {c['vertices_out']} vertices ({c['merged']} merged, {c['weight_conflicts']} weight conflicts)"
+    if s == "degenerate":
+        again = (f", {c['dropped_after_simplify']} more from the proxy"
+                 if c.get("dropped_after_simplify") else "")
+        return (f"{c['dropped']} zero-area triangles dropped{again} ({c['repeated_index']} with a repeated "
+                f"vertex; area <= {c['area_threshold']:.2g}), {c['faces_out']} left")
     if s == "orient":
         return (f"{c['faces_flipped']} faces flipped, {c['shells']} shells ({c['closed_shells']} closed), "
                 f"{c['nonmanifold_edges']} non-manifold edges")
@@ -45,7 +80,8 @@ def _stage_line(rep) -> str:
     if s == "parts":
         return f"{c['parts']} parts ({c['mode']}), {len(c.get('folded_joints', []))} joints folded"
     if s == "quantize":
-        k = f", root scale x{c['root_scale']:.6g} onto the Skeleton" if abs(c["root_scale"] - 1.0) > 1e-6 else ""
+        k = (f", root scale x{c['root_scale']:.6g} folded into the translations"
+             if abs(c["root_scale"] - 1.0) > 1e-6 else "")
         return (f"{c['clips']} clips as stored (float3, quatf, half3){k}; moves a vertex "
                 f"<= {c['storage_error_relative']:.2g} x size")
     if s == "spheres":
@@ -54,19 +90,21 @@ def _stage_line(rep) -> str:
         return (f"{c['faces_in']} -> {c['faces_out']} faces, {c['closed_shells_out']}/{c['closed_shells_in']} closed shells "
                 f"closed, deviation <= {_num(c['deviation'], '.4g')} ({_num(None if c['deviation_relative'] is None else 100 * c['deviation_relative'], '.3g')}% of size)")
     if s == "write":
-        return f"{c['path']} ({c['bytes']} bytes)"
+        checked = f"; error rules passed in {c['check_seconds']:.3f} s" if "check_seconds" in c else ""
+        return f"{c['path']} ({c['bytes']} bytes, {c.get('skinning_method', 'classicLinear')} skinning{checked})"
     return ""
 
 
 def format_summary(result) -> str:
     s = result.summary()
     lines = [f"colossus import {s['source']} -> {s['output']}", ""]
-    lines.append(f"  {'stage':<8} {'seconds':>8}  what it did")
+    lines.append(f"  {'stage':<10} {'seconds':>8}  what it did")
     for rep in result.reports:
-        lines.append(f"  {rep.stage:<8} {rep.seconds:8.3f}  {_stage_line(rep)}")
-    lines.append(f"  {'total':<8} {s['seconds']:8.3f}")
+        lines.append(f"  {rep.stage:<10} {rep.seconds:8.3f}  {_stage_line(rep)}")
+    lines.append(f"  {'total':<10} {s['seconds']:8.3f}")
     lines.append("")
-    lines.append(f"  vertices {s['vertices_in']} in, {s['vertices_out']} out | faces flipped {s['faces_flipped']} | "
+    lines.append(f"  vertices {s['vertices_in']} in, {s['vertices_out']} out | zero-area triangles dropped "
+                 f"{s['degenerate_dropped']} | faces flipped {s['faces_flipped']} | "
                  f"influences dropped {s['influences_dropped']} | parts {s['parts']} | clips {s['clips']} | frames {s['frames']}")
     lines += _source_lines(next(r for r in result.reports if r.stage == "read"), result.mesh)
     sph = next(r for r in result.reports if r.stage == "spheres")
@@ -195,9 +233,11 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
     """Import the Blender export SRC and write the collider asset OUT.
 
     \b
-    Stages: read, bake, weld, orient, bind, [simplify], parts, spheres, write.
+    Stages: read, bake, weld, degenerate, orient, bind, [simplify], parts, quantize, spheres, write.
     Exit status: 0 written; 1 the input is unusable, or with --strict holds something
-    not carried exactly (nothing written); 2 usage, or an output that cannot be written.
+    not carried exactly, or the asset made of it would fail one of the validator's error
+    rules (checked before it is renamed into place; nothing written); 2 usage, or an output
+    that cannot be written.
 
     \b
     Several inputs (SRC..., directories, globs): -o is a directory and each input becomes
@@ -242,7 +282,7 @@ def import_cmd(srcs, out, up_axis, meters_per_unit, max_influences, unweighted, 
         line = f"importing [{'#' * done}{'-' * (24 - done)}] {i}/{n} {name}"
         click.echo(("\r" + line.ljust(60)) if tty else line, err=True, nl=not tty)
 
-    result = import_asset(src, out, settings, progress=on_stage, strict=strict)
+    result = import_asset(src, out, settings, progress=on_stage, strict=strict, check=error_rules)
     n = len(settings.stages())
     on_stage(n, n, "done")
     if progress and tty:
@@ -264,7 +304,7 @@ def _import_many(srcs, out, settings, as_json, progress, jobs, scheduler, strict
     show = sys.stderr.isatty() if progress is None else progress
     try:
         rows, interrupted = import_many(srcs, out, settings, jobs=jobs, scheduler=scheduler, progress=show,
-                                        strict=strict)
+                                        strict=strict, check=error_rules)
     except OSError as exc:
         raise OutputError(f"-o {out}: {exc.strerror or exc}") from None
     if as_json:

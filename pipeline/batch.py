@@ -56,8 +56,9 @@ def output_names(sources, ext: str = ".usda") -> list:
             raise ValueError(f"cannot give distinct output names to {sorted(set(names))}")
 
 
-def _import_unit(src, out, settings, strict=False):
-    """Worker side of one batch import: never raises for a bad input."""
+def _import_unit(src, out, settings, strict=False, check=None):
+    """Worker side of one batch import: never raises for a bad input (``check``: a module-level
+    function, so that it pickles by name to a worker process)."""
     from colossus.runtime import usdlog
 
     from .errors import ColossusError
@@ -65,7 +66,7 @@ def _import_unit(src, out, settings, strict=False):
     usdlog.silence()
     usdlog.take()
     try:
-        res = import_asset(src, out, settings, strict=strict)
+        res = import_asset(src, out, settings, strict=strict, check=check)
     except ColossusError as e:
         return {"source": src, "output": out, "ok": False, "error": one_line(e)}
     except MemoryError:
@@ -75,9 +76,10 @@ def _import_unit(src, out, settings, strict=False):
                 "error": f"internal error ({type(e).__name__}: {one_line(e)})"}
     return {"source": src, "output": out, "ok": True, "summary": res.summary()}
 
-def import_many(sources, out_dir, settings, jobs=1, scheduler=None, progress=False, strict=False):
+def import_many(sources, out_dir, settings, jobs=1, scheduler=None, progress=False, strict=False, check=None):
     """Import every file of ``sources`` (see :func:`expand_inputs`) into ``out_dir``
-    (``strict``: refuse each input whose reader met anything not carried exactly).
+    (``strict``: refuse each input whose reader met anything not carried exactly; ``check``: run
+    on each written asset before its rename, :func:`pipeline.run.import_asset`).
 
     Returns ``(rows, interrupted)``: one dict per input in input order (``source``,
     ``output``, ``ok``, and ``summary`` or ``error``); inputs not imported because of Ctrl-C
@@ -110,7 +112,8 @@ def import_many(sources, out_dir, settings, jobs=1, scheduler=None, progress=Fal
         def lost(e):
             rows[src] = {"source": src, "output": out, "ok": False, "error": f"import crashed: {e}"}
             bar.advance(True)
-        return Task(_import_unit, (src, out, settings) + ((True,) if strict else ()), ok, err, lost)
+        extra = (strict, check) if check is not None else (True,) if strict else ()
+        return Task(_import_unit, (src, out, settings) + extra, ok, err, lost)
 
     outs = [os.path.join(out_dir, n) for n in names]
     work = list(zip(uniq, outs))

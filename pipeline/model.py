@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from colossus.runtime.kernels.skin import METHODS as SKINNING_METHODS
 from colossus.runtime.schema import parents_first
 
 
@@ -151,6 +152,11 @@ class SkinnedMesh:
         proven on and what ``write`` writes; empty before.
     root_scale : float
         The roots' common scale ``k`` (``quantize``), which the writer puts on the Skeleton prim.
+    skinning_method : {"classicLinear", "dualQuaternion"}
+        How the skin deforms (UsdSkel's ``primvars:skel:skinningMethod``): linear blend (the
+        default) or dual-quaternion skinning exactly as UsdSkel does it
+        (:mod:`runtime.kernels.skin`).  Only the USD reader sets ``dualQuaternion`` (glTF has no
+        DQS; assimp files stay linear).
     """
 
     positions: np.ndarray
@@ -170,6 +176,7 @@ class SkinnedMesh:
     parts: Parts | None = None
     stored_clips: tuple = ()
     root_scale: float = 1.0
+    skinning_method: str = "classicLinear"
 
     def __post_init__(self):
         conv = {
@@ -191,6 +198,8 @@ class SkinnedMesh:
         _check(self.rest_transforms.shape == (b, 4, 4), "rest_transforms shape", (b, 4, 4), self.rest_transforms.shape)
         _check(self.geom_bind.shape == (4, 4), "geom_bind shape", (4, 4), self.geom_bind.shape)
         _check(self.up_axis in ("Y", "Z"), "up_axis", "'Y' or 'Z'", self.up_axis)
+        _check(self.skinning_method in SKINNING_METHODS, "skinning_method", " or ".join(SKINNING_METHODS),
+               self.skinning_method)
         for c in self.clips:
             _check(c.local.shape[1] == b, f"clip {c.name!r} joint count", b, c.local.shape[1])
         object.__setattr__(self, "stored_clips", tuple(self.stored_clips))
@@ -243,7 +252,8 @@ def skel_transforms(local: np.ndarray, parents: np.ndarray) -> np.ndarray:
 
 
 def skin_points(mesh: SkinnedMesh, skel: np.ndarray) -> np.ndarray:
-    """Linear-blend skinning, a plain numpy reference.
+    """The mesh skinned by its own method (linear blend: a plain numpy reference; dual quaternion:
+    the one kernel's UsdSkel DQS, :func:`runtime.kernels.skin.fold_dq`).
 
     Parameters
     ----------
@@ -259,6 +269,11 @@ def skin_points(mesh: SkinnedMesh, skel: np.ndarray) -> np.ndarray:
     if single:
         skel = skel[None]
     inv_bind = np.linalg.inv(mesh.bind_transforms)
+    if mesh.skinning_method != "classicLinear":
+        from colossus.runtime.kernels import skin as SK
+        out = SK.skin_frames(mesh.positions, mesh.joint_indices, mesh.joint_weights,
+                             SK.fold_method(mesh.skinning_method, skel @ inv_bind, mesh.geom_bind), dtype=np.float64)
+        return out[0] if single else out
     p = np.c_[mesh.positions.astype(np.float64), np.ones(mesh.vertex_count)] @ mesh.geom_bind.T
     out = np.zeros((len(skel), mesh.vertex_count, 3))
     for f in range(len(skel)):

@@ -32,7 +32,9 @@ The ``what`` ids (README, "Not carried"):
 ``gltf_extension``        a glTF extension used that changes geometry or deformation, not read
 ``ogre_vertex_animation``  an Ogre mesh's pose / morph (vertex) animation (assimp makes no clip)
 ``ogre_animation_link``   an Ogre skeleton's links to another skeleton's animations (not read)
-``usd_skinning_method``   ``primvars:skel:skinningMethod = "dualQuaternion"``
+``usd_skinning_method``   meshes that mix ``primvars:skel:skinningMethod`` values: the collision
+                          mesh carries one (the method of most points; a USD source whose
+                          meshes agree has its method carried, linear or dual-quaternion)
 ========================  ======================================================================
 """
 

@@ -1,6 +1,7 @@
-"""The import stage chained in one visible place: read -> bake -> weld -> orient -> bind -> [simplify] -> parts -> spheres -> write.
+"""The import stage chained in one visible place: read -> bake -> weld -> degenerate -> orient -> bind -> [simplify] -> parts -> quantize -> spheres -> write.
 
-``simplify`` runs only with ``--target-faces`` / ``--max-deviation`` (a collision proxy)."""
+``simplify`` runs only with ``--target-faces`` / ``--max-deviation`` (a collision proxy); the
+``degenerate`` test runs again on its proxy (it moves vertices)."""
 
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from .options import parse_max_deviation
 from .stages import StageReport
 from .stages.bake import bake
 from .stages.bind import UNWEIGHTED_POLICIES, bind
+from .stages.degenerate import degenerate as drop_degenerate
 from .stages.orient import orient
 from .stages.parts import parts
 from .stages.simplify import simplify
@@ -30,7 +32,7 @@ from .stages.write import check_output_path, write
 from .tolerances import LARGEST_COORDINATE, PARTS_ANY_THRESHOLD, RESAMPLING_RELATIVE
 from .xforms import degenerate
 
-STAGES = ("read", "bake", "weld", "orient", "bind", "simplify", "parts", "quantize", "spheres", "write")
+STAGES = ("read", "bake", "weld", "degenerate", "orient", "bind", "simplify", "parts", "quantize", "spheres", "write")
 #: Stages that run only when asked for.
 OPTIONAL_STAGES = ("simplify",)
 
@@ -103,6 +105,8 @@ class ImportResult:
             "vertices_in": r["read"].counts["vertices"], "vertices_out": m.vertex_count,
             "faces_in": r["read"].counts["faces"], "faces_out": m.face_count,
             "faces_flipped": r["orient"].counts.get("faces_flipped", 0),
+            "degenerate_dropped": (r["degenerate"].counts["dropped"]
+                                   + r["degenerate"].counts.get("dropped_after_simplify", 0)),
             "influences_dropped": r["bind"].counts["influences_dropped"] + r["bind"].counts["negligible_dropped"],
             "joints": m.joint_count, "parts": len(m.parts), "clips": len(m.clips), "frames": frames,
             "seconds": round(self.seconds, 4),
@@ -318,12 +322,14 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None, s
         raise InputError(src, notcarried.strict_refusal(mesh.source[notcarried.SOURCE_KEY]))
     mesh = step("bake", lambda: bake(mesh, s.up_axis, s.meters_per_unit))
     mesh = step("weld", lambda: weld(mesh))
+    mesh = step("degenerate", lambda: drop_degenerate(mesh))
     mesh = step("orient", lambda: orient(mesh))
     mesh = step("bind", lambda: bind(mesh, s.max_influences, s.unweighted))
     if stop_after == "bind":
         return mesh, reports
     if s.proxy:
         mesh = step("simplify", lambda: simplify(mesh, s.target_faces, s.max_deviation, s.max_influences))
+        mesh = _degenerate_again(mesh, reports)
     if stop_after == "simplify":
         return mesh, reports
     mesh = step("parts", lambda: parts(mesh, s.parts, s.min_part_faces, s.parts_threshold))
@@ -331,6 +337,19 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None, s
     mesh = step("quantize", lambda: quantize(mesh))
     mesh = step("spheres", lambda: _spheres(mesh, src))
     return mesh, reports
+
+
+def _degenerate_again(mesh, reports):
+    """The ``degenerate`` test on a simplified proxy (its collapses move vertices, and a face they
+    leave may be thinner than the tolerance though it did not turn over): what it drops is added
+    to the ``degenerate`` report as ``dropped_after_simplify`` (the proxy's deviation bound was
+    measured with those faces, each at most a sliver of zero width), its time to the stage's."""
+    t0 = time.perf_counter()
+    out, rep = drop_degenerate(mesh)
+    own = next(r for r in reports if r.stage == "degenerate")
+    own.counts["dropped_after_simplify"] = rep.counts["dropped"]
+    own.seconds += time.perf_counter() - t0
+    return out
 
 
 def _spheres(mesh, src):
@@ -353,13 +372,17 @@ def _spheres(mesh, src):
 
 
 def import_asset(src, out, settings: ImportSettings | None = None, progress=None, strict: bool = False,
-                 build: dict | None = None) -> ImportResult:
+                 build: dict | None = None, check=None) -> ImportResult:
     """Import the Blender export ``src`` and write the collider asset ``out`` (atomically).
 
     ``strict``: refuse (:class:`InputError`, nothing written) when the reader met anything it
     does not carry exactly (``--strict``; :mod:`pipeline.notcarried`).  ``build``: the build
     stamp of ``colossus build`` (its key and what went into it), stored in the provenance as
-    ``customData["colossus"]["build"]``.
+    ``customData["colossus"]["build"]``.  ``check(path, settings) -> None | str``: run on the
+    written file before its rename (:func:`pipeline.stages.write.write`) with this import's
+    :class:`ImportSettings`; a string refuses the asset (:class:`InputError`
+    ``"<src>: <string>"``, nothing written).  The command line passes the validator's error rules
+    (``cli.import_.error_rules``).
 
     Raises
     ------
@@ -389,7 +412,7 @@ def import_asset(src, out, settings: ImportSettings | None = None, progress=None
         provenance["proxy"] = proxy_provenance(simp)
     if build:
         provenance["build"] = dict(build)
-    mesh, rep = write(mesh, out, provenance)
+    mesh, rep = write(mesh, out, provenance, check=None if check is None else (lambda path: check(path, s)))
     rep.seconds = time.perf_counter() - t1
     reports.append(rep)
     return ImportResult(mesh, reports, time.perf_counter() - t0, os.fspath(out))

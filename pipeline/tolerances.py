@@ -10,6 +10,12 @@ import numpy as np
 
 #: Vertices closer than this (times the model size) are the same position for welding.
 WELD_RELATIVE = 1e-6
+#: ``degenerate`` drops a triangle whose bind-pose area is at most (this x ZERO_AREA_RELATIVE x
+#: model size)^2 (``runtime.schema.zero_area_faces``, the very test of the validator's COL204 with
+#: its ``ZERO_AREA_RELATIVE``): stricter by this factor in length (4 in area), so the rounding
+#: that differs between the importer's numbers and the asset's (the roots' scale moved onto the
+#: Skeleton, a simplified proxy's model size) can never leave a triangle the rule flags.
+DEGENERATE_MARGIN = 2.0
 #: Two influence weights are "the same" for welding when they differ by less than this (absolute).
 WELD_WEIGHT = 1e-4
 #: Influence weights below this (absolute, after normalisation) are negligible and dropped by ``bind``.

@@ -34,7 +34,7 @@ class ColliderData:
     part_chunks (P+1,) into the chunks, chunk_vert_offsets (C+1,) / chunk_verts: CSR of each
     chunk's distinct vertices (what its culling sphere is fitted to). ``bounds``: the per-part data of the sound bounds
     (:class:`runtime.kernels.bounds.BoundData`), for culling and certifying spheres without
-    skinning.  Matrices are column-vector (``p' = M @ p``, :mod:`runtime.schema`), converted from
+    skinning (linear blend only: a dual-quaternion mesh, ``skinning_method``, is skinned).  Matrices are column-vector (``p' = M @ p``, :mod:`runtime.schema`), converted from
     USD's row-vector layout once, here.
     """
 
@@ -70,6 +70,7 @@ class ColliderData:
     chunk_verts: np.ndarray
     bounds: BoundData
     faces_shared: bool = False  # some face is in more than one part (--parts any)
+    skinning_method: str = "classicLinear"  # or "dualQuaternion" (primvars:skel:skinningMethod)
     clips: list = field(default_factory=list)
     static_local_to_world: np.ndarray | None = None
     stage: object = None  # kept open only when the skeleton's transform is animated
@@ -377,6 +378,10 @@ def _read(path):
     geom_bind = schema.matrices_from_usd(gb) if gb is not None else np.eye(4)
     if not np.isfinite(geom_bind).all():
         raise ColliderError(f"{mesh.GetPath()}: primvars:skel:geomBindTransform is not finite")
+    method = schema.skinning_method(mesh)
+    if method not in schema.SKINNING_METHODS:
+        raise ColliderError(f"{mesh.GetPath()}.{schema.SKINNING_METHOD_ATTR} is {method!r}: the runtime poses "
+                            f"{' and '.join(schema.SKINNING_METHODS)} only")
     blend = blend_shapes(mesh)
     if blend:
         raise ColliderError(f"{mesh.GetPath()} has UsdSkel blend shapes ({blend}); colossus skins without them, so "
@@ -440,7 +445,7 @@ def _read(path):
         face_offsets=offs, faces=faces, vert_offsets=vert_offsets, verts=verts,
         face_part=face_part, chunk_offsets=chunk_offsets, part_chunks=part_chunks,
         chunk_vert_offsets=chunk_vert_offsets, chunk_verts=chunk_verts, faces_shared=bool(len(faces) > F),
-        bounds=bounds, clips=clips, static_local_to_world=l2w,
+        bounds=bounds, clips=clips, static_local_to_world=l2w, skinning_method=method,
         stage=stage if l2w is None else None,
     ), stage
 

@@ -4,8 +4,10 @@ D, exact) and for every time between the samples of a clip as UsdSkel interpolat
 Used by the frame proof (:mod:`validators.frameproof`) and by the import's spheres stage
 (:mod:`pipeline.stages.spheres`, which grows each sphere just enough for the certificate); it
 sits in the runtime because both need it and the runtime is the lowest layer.  Numba kernels are
-in :mod:`runtime.kernels.bounds` and :mod:`runtime.kernels.skin`; the bounds and their soundness
-arguments are written in those modules' docstrings and in :func:`continuous` below.
+in :mod:`runtime.kernels.bounds`, :mod:`runtime.kernels.interval`, :mod:`runtime.kernels.skin`,
+:mod:`runtime.kernels.farthest` (the exact tier by chunks) and :mod:`runtime.kernels.subdivide`
+(levels B and C batched); the bounds and their soundness arguments are written in those modules'
+docstrings and in :func:`continuous` below.
 
 Matrices are column-vector float64 (``p' = M @ p``).  ``world`` is the skeleton prim's
 local-to-world transform (stage space); a clip is a :class:`runtime.schema.Clip`.
@@ -20,12 +22,35 @@ import numpy as np
 from . import kernels as B  # the bounds: at a pose (kernels.bounds) and between samples (kernels.interval)
 from .kernels import pose as PK
 from .kernels import skin as SK
+from .kernels import farthest as FA
+from .kernels import subdivide as SD
 from .schema import parents_first
 
 #: Subdivision depth of one sample interval before the certificate gives up (2^8 sub-steps).
 MAX_DEPTH = 8
 #: A sample interval that really fails is sampled at this many sub-steps to report its worst excess.
 FAIL_SAMPLES = 16
+#: Levels B and C by the compiled, batched kernels (:func:`_refine_batched`, one kernel call per
+#: subdivision level over every open node); False: the reference loop (:func:`_refine`, one
+#: numpy call per node, kept as the benchmark's baseline and the tests' reference).
+BATCHED = True
+#: Until this process has refined this many open (interval, part) pairs the reference loop runs
+#: instead (the same decisions): a demo-sized asset's few pairs take milliseconds so, and a new
+#: user's first import or validation of it does not compile the batched kernels (~2 s once per
+#: machine); a real character's clips pass it within the first clips.
+BATCHED_MIN_PAIRS = 128
+_refined_pairs = 0
+#: The sampled proof's exact tier by the chunk search (:func:`runtime.kernels.farthest.farthest`:
+#: chunk bounds first, then exact skinning of the chunks that can hold the farthest vertex,
+#: threaded) instead of every vertex of the part (:func:`runtime.kernels.skin.part_farthest`).
+#: The same distances and vertices either way.  Off: on the corpus characters' tight spheres most
+#: chunks lie near the sphere (8-vertex chunks still skin 59 % of the vertex-poses on the Godot
+#: mannequin, 16-vertex ones 76 %) and the search skinned ~20 % slower per vertex, so it measured
+#: 0.7-0.9x the whole-part kernel (issue 22 item 3, open).
+CHUNKED = False
+#: :func:`_refine_batched` computes the joint transforms of at most about this many bytes of
+#: times at once (the nodes of a level are processed in chunks).
+BATCH_BYTES = 16 << 20
 #: Rotation speed and acceleration margins over the interval's angle (GfSlerp's linear branch
 #: and float32 quaternions; see :func:`factor_bounds`).
 OMEGA_MARGIN = 1.001
@@ -56,6 +81,9 @@ class Rig:
     verts: np.ndarray
     world: np.ndarray = field(default_factory=lambda: np.eye(4))
     bounds: B.BoundData | None = None
+    #: "classicLinear" or "dualQuaternion" (the mesh's ``primvars:skel:skinningMethod``): a
+    #: dual-quaternion rig is certified by :mod:`runtime.certify_dq` (exact skinning at samples)
+    skinning_method: str = SK.CLASSIC_LINEAR
 
     def __post_init__(self):
         J = len(self.bind)
@@ -78,13 +106,26 @@ class Rig:
                                        self.bind, self.part_joint, self.part_centers, self.part_radii,
                                        self.vert_offsets, self.verts)
         self._paths = None
+        self._chunks = None
+        self._ibg = None
+
+    @property
+    def chunks(self):
+        """The parts' vertex chunks of the exact tier (:func:`runtime.kernels.farthest.chunk_data`)."""
+        if self._chunks is None:
+            self._chunks = FA.chunk_data(self.points, self.joint_indices, self.joint_weights, self.vert_offsets,
+                                         self.verts)
+        return self._chunks
 
     @property
     def P(self) -> int:
         return len(self.part_joint)
 
     def skin_mats(self, skel) -> np.ndarray:
-        """(F, J, 12) folded stage-space skinning transforms ``world @ skel @ inv_bind @ geom_bind``."""
+        """(F, J, 12) folded stage-space skinning transforms ``world @ skel @ inv_bind @ geom_bind``
+        (a dual-quaternion rig: the (F, J, 1, DQ_WIDTH) layout of :func:`runtime.kernels.skin.fold_dq`)."""
+        if self.skinning_method != SK.CLASSIC_LINEAR:
+            return SK.fold_method(self.skinning_method, skel @ self.inv_bind, self.geom_bind, self.world)
         return SK.fold(self.world @ skel @ self.inv_bind @ self.geom_bind)
 
     def joint_space_mats(self, skel, joint) -> np.ndarray:
@@ -152,13 +193,20 @@ def sampled(rig: Rig, skel, tol_abs: float, tol_rel: float, exact=None) -> Sampl
     R = sph[..., 3]
     limit = R * (1.0 + tol_rel) + tol_abs
     tier = np.full(R.shape, 2, dtype=np.int8)
-    tier[kb <= limit] = 0
-    tier[(tier == 2) & (db <= limit)] = 1
+    if rig.skinning_method == SK.CLASSIC_LINEAR:  # tests K and D bound linear blends only
+        tier[kb <= limit] = 0
+        tier[(tier == 2) & (db <= limit)] = 1
+    else:  # dual quaternion: every part skinned exactly (runtime.certify_dq)
+        kb = db = np.full(R.shape, np.inf)
     todo = tier == 2
     if exact is not None:
         todo = todo | exact
-    d, v = SK.part_farthest(rig.points, rig.joint_indices, rig.joint_weights, rig.skin_mats(skel),
-                            rig.vert_offsets, rig.verts, sph[..., :3], todo=todo)
+    if CHUNKED:
+        d, v, _ = FA.farthest(rig.points, rig.joint_indices, rig.joint_weights, rig.skin_mats(skel), rig.vert_offsets,
+                              rig.verts, rig.part_joint, sph[..., :3], todo, rig.chunks)
+    else:
+        d, v = SK.part_farthest(rig.points, rig.joint_indices, rig.joint_weights, rig.skin_mats(skel),
+                                rig.vert_offsets, rig.verts, sph[..., :3], todo=todo)
     bound = np.where(todo, d, np.minimum(kb, db))
     return Sampled(tier, bound, d, v, sph)
 
@@ -258,7 +306,8 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
       sampled proof's bounds of the farthest vertex at both ends, in J space), so the bound is
       ``max(D0, D1) + min(a_P max_b delta_b, sum_b wmax_b delta_b)``.
     * Level B: the same per vertex, with both ends skinned exactly
-      (:func:`runtime.kernels.interval.chord_tasks`).
+      (:func:`runtime.kernels.subdivide.chord_nodes`, batched over every open node of a level;
+      its numpy reference :func:`runtime.kernels.interval.chord_tasks`).
     * Level C: halve the interval (UsdSkel's interpolation evaluated at the midpoint by the
       runtime's port, :mod:`runtime.kernels.pose`); on a sub-interval of fraction f the
       recursion's velocities scale by f and accelerations by f^2 (the magnitudes bounded on the
@@ -279,6 +328,8 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     rho : (P,) or (I, P), optional: radii to hold the bounds to, times the interval's scale ratio as
         for the spheres' own radii (default: the spheres' radii with the tolerance)
     """
+    if rig.skinning_method != SK.CLASSIC_LINEAR:  # the chord bounds are LBS's: runtime.certify_dq.certificate
+        raise ValueError(f"continuous: a {rig.skinning_method!r} rig is certified by runtime.certify_dq")
     times = np.asarray(times, dtype=np.float64)
     F, P = len(times), rig.P
     I = F - 1
@@ -359,7 +410,11 @@ def continuous(rig: Rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol
     out = Continuous(status, bound, rho, ratio=ratio[:, J].copy())
     todo = np.argwhere(status == -1)
     if len(todo):
-        _refine(rig, clip, times, fac, delta, pert, own, pair_part, todo, out, tol_abs, tol_rel, growth, max_depth)
+        global _refined_pairs
+        _refined_pairs += len(todo)
+        batched = BATCHED and _refined_pairs >= BATCHED_MIN_PAIRS
+        (_refine_batched if batched else _refine)(rig, clip, times, fac, delta, pert, own, pair_part, todo, out,
+                                                  tol_abs, tol_rel, growth, max_depth)
     return out
 
 
@@ -467,6 +522,123 @@ def _refine(rig, clip, times, fac, delta, pert, own, pair_part, todo, out, tol_a
             out.status[i, p] = 1 if deepest.get(key, 0) == 0 else 2
         out.bound[i, p] = worst.get(key, np.inf) if out.status[i, p] != 3 else np.inf
     for i, p in np.argwhere((out.status == 3) | (out.status == 4)):
+        out.failures.append(_describe_failure(rig, clip, times, int(i), int(p), out, mats, found.get((int(i), int(p)))))
+
+
+def _dev_rows(rig, delta, pert, own, todo):
+    """Dense per (interval, part) rows, by joint, of the chord deviation ``delta`` and the
+    half-precision rounding ``pert`` of the pairs ``todo`` (0 for the part's own joint and for
+    joints outside the part): (len(todo), J) each."""
+    bd = rig.bounds
+    Jn = len(rig.bind)
+    drow = np.zeros((len(todo), Jn))
+    prow = np.zeros((len(todo), Jn))
+    for p in np.unique(todo[:, 1]):
+        rows = np.flatnonzero(todo[:, 1] == p)
+        lo, hi = bd.pj_offsets[p], bd.pj_offsets[p + 1]
+        if hi == lo:
+            continue
+        cols = bd.pj_joint[lo:hi]
+        i = todo[rows, 0]
+        drow[rows[:, None], cols[None]] = np.where(own[None, lo:hi], 0.0, delta[i, lo:hi])
+        prow[rows[:, None], cols[None]] = np.where(own[None, lo:hi], 0.0, pert[i, lo:hi])
+    return drow, prow
+
+
+def _refine_batched(rig, clip, times, fac, delta, pert, own, pair_part, todo, out, tol_abs, tol_rel, growth,
+                    max_depth):
+    """Levels B and C of :func:`continuous` for the (interval, part) pairs ``todo``: the decisions
+    of :func:`_refine`, node for node and in its order, with each subdivision level's per-vertex
+    chord bounds computed by one batched kernel (:func:`runtime.kernels.subdivide.chord_nodes`) over
+    all its open nodes, the joint transforms of the level's times by one interpolation and one
+    composition call (:func:`runtime.kernels.subdivide.pose_at`), and ``inv_bind @ geom_bind``
+    once per rig."""
+    bd = rig.bounds
+    P = rig.P
+    if rig._ibg is None:
+        rig._ibg = np.ascontiguousarray(rig.inv_bind @ rig.geom_bind)
+    todo = np.asarray(todo, dtype=np.int64)
+    drow, prow = _dev_rows(rig, delta, pert, own, todo)
+    flat_status = out.status.reshape(-1)  # a view: writes land in out.status
+    worst = np.full(flat_status.shape, -np.inf)
+    deepest = np.zeros(flat_status.shape, np.int64)
+    found = {}
+    mats = None  # the reference's per-time cache, for the rare exact checks and failure reports
+    # nodes of the current level, in the reference's order
+    n_i, n_p = todo[:, 0].copy(), todo[:, 1].copy()
+    n_a, n_b = times[n_i].astype(np.float64), times[n_i + 1].astype(np.float64)
+    n_row = np.arange(len(todo), dtype=np.int64)
+    depth = 0
+    Jn = len(rig.bind)
+    chunk = max(64, BATCH_BYTES // (2 * 2 * Jn * 16 * 8))
+    while len(n_i):
+        key = n_i * P + n_p
+        frac = (n_b - n_a) / (times[n_i + 1] - times[n_i])
+        N = len(n_i)
+        u, d0, d1 = np.empty(N), np.empty(N), np.empty(N)
+        for lo in range(0, N, chunk):
+            s = slice(lo, lo + chunk)
+            ts, inv = np.unique(np.r_[n_a[s], n_b[s]], return_inverse=True)
+            skel, skin = SD.pose_at(clip, ts, rig.rest_local, rig.parents, rig.topo, rig._ibg)
+            k = len(n_a[s])
+            r = SD.chord_nodes(rig.points, rig.joint_indices, rig.joint_weights, rig.vert_offsets, rig.verts,
+                               bd.part_joint, bd.pj_offsets, bd.pj_joint, bd.part_centers, skel, skin,
+                               n_p[s], inv[:k].astype(np.int64), inv[k:].astype(np.int64), n_row[s],
+                               frac[s] * frac[s], drow, prow)
+            u[s], d0[s], d1[s] = r[0], r[2], r[4]
+        rho = out.rho[n_i, n_p]
+        alive = flat_status[key] != 3
+        ok = u <= rho
+        first_fail = {}
+        if not growth and depth > 0:
+            for n in np.flatnonzero(alive & ~ok & (np.maximum(d0, d1) > rho)):
+                kk = int(key[n])
+                if flat_status[kk] == 3:
+                    continue
+                # an end of this sub-interval may be a real failure: decide in stage space
+                if mats is None:
+                    mats = _Mats(rig, clip, times, fac)
+                p = int(n_p[n])
+                t_end = float(n_a[n]) if d0[n] >= d1[n] else float(n_b[n])
+                d, R, v = sampled_exact(rig, mats.skel_at(t_end)[None], [p])
+                if d[0] - R[0] * (1 + tol_rel) - tol_abs > 0:
+                    flat_status[kk] = 3
+                    found[(int(n_i[n]), p)] = (t_end, int(v[0]), float(d[0] - R[0]), float(R[0]))
+                    first_fail[kk] = n
+        proc = alive
+        if first_fail:  # the nodes of a key after its first failure in this level are skipped
+            ff = np.array([first_fail.get(int(k_), N) for k_ in key], np.int64)
+            proc = alive & (np.arange(N) < ff)
+        done = proc & ok
+        np.maximum.at(worst, key[done], u[done])
+        np.maximum.at(deepest, key[done], depth)
+        rest = proc & ~ok
+        if depth >= max_depth:
+            np.maximum.at(worst, key[rest], u[rest])
+            np.maximum.at(deepest, key[rest], depth)
+            if not growth:
+                kr = key[rest]
+                flat_status[kr[flat_status[kr] != 3]] = 4
+            break
+        sub = np.flatnonzero(rest)
+        out.subdivided += len(sub)
+        m = 0.5 * (n_a[sub] + n_b[sub])
+        n_i, n_p, n_row = np.repeat(n_i[sub], 2), np.repeat(n_p[sub], 2), np.repeat(n_row[sub], 2)
+        a2, b2 = np.empty(2 * len(sub)), np.empty(2 * len(sub))
+        a2[0::2], b2[0::2] = n_a[sub], m
+        a2[1::2], b2[1::2] = m, n_b[sub]
+        n_a, n_b = a2, b2
+        depth += 1
+    i, p = todo[:, 0], todo[:, 1]
+    key = i * P + p
+    st = out.status[i, p]
+    open_ = st == -1
+    out.status[i[open_], p[open_]] = np.where(deepest[key[open_]] == 0, 1, 2)
+    out.bound[i, p] = np.where((out.status[i, p] != 3) & (worst[key] > -np.inf), worst[key], np.inf)
+    fails = np.argwhere((out.status == 3) | (out.status == 4))
+    if len(fails) and mats is None:
+        mats = _Mats(rig, clip, times, fac)
+    for i, p in fails:
         out.failures.append(_describe_failure(rig, clip, times, int(i), int(p), out, mats, found.get((int(i), int(p)))))
 
 

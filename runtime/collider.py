@@ -113,7 +113,11 @@ class Pose:
         self.refit = np.zeros(P, dtype=bool)
         self.skel_transforms = np.empty((J, 4, 4))
         self.skinning_transforms = np.empty((J, 4, 4))
-        self._skin_world = np.empty((1, J, 12))  # local_to_world @ skinning_transforms (kernels.skin.fold)
+        # local_to_world @ skinning_transforms (kernels.skin.fold); dual-quaternion meshes: the
+        # wider layout of kernels.skin.fold_dq, which the one kernel's method switch reads
+        self._dq = d.skinning_method == SK.DUAL_QUATERNION
+        self._skin_world = np.empty((1, J, 1, SK.DQ_WIDTH)) if self._dq else np.empty((1, J, 12))
+        self._lbs_world = np.empty((1, J, 12)) if self._dq else self._skin_world
         self.joint_world = np.empty((J, 4, 4))
         self._world1 = self.joint_world.reshape(1, J, 4, 4)
         self.local_to_world = np.eye(4)
@@ -198,7 +202,9 @@ class Pose:
     def _posed(self):
         d = self._data
         PK._compose(self._local, d.parents, d.topo_order, d.inv_bind, d.geom_bind, self.local_to_world,
-                    self.skel_transforms, self.skinning_transforms, self.joint_world, self._skin_world)
+                    self.skel_transforms, self.skinning_transforms, self.joint_world, self._lbs_world)
+        if self._dq:  # UsdSkel's DQS skins in skeleton space: geomBind first, local-to-world last
+            self._skin_world[:] = SK.fold_dq(self.skel_transforms @ d.inv_bind, d.geom_bind, self.local_to_world)
         self._version += 1
         if not self.collider.lazy:
             self._bounds()
@@ -209,8 +215,11 @@ class Pose:
         self._bounded = self._version
         d = self._data
         B._pose_bounds_serial(self._world1, *d.bounds.args(), self._sph, self._kb, self._db)
+        if self._dq:  # tests K and D bound linear blends only: a dual-quaternion part is skinned
+            self._kb[:] = np.inf
+            self._db[:] = np.inf
         B._cull_spheres(self._sph, self._kb, self._db, self._spheres, self._cull)
-        if not self.collider.lazy:
+        if not self.collider.lazy or self._dq:
             self._skin_all()
             d_, _ = SK.part_farthest(d.rest_points, d.joint_indices, d.joint_weights, self._skin_world,
                                      d.vert_offsets, d.verts, self.spheres[None, :, :3])

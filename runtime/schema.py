@@ -60,6 +60,22 @@ PROXY_WORST_FRAME = "colossus:proxy:worstFrame"
 PROXY_WORST_BONE = "colossus:proxy:worstBone"
 PROXY_WORST_DIRECTION = "colossus:proxy:worstDirection"
 
+#: The collision mesh's skinning method (UsdSkel's ``primvars:skel:skinningMethod``, a uniform
+#: token; absent means ``classicLinear``) and the methods the runtime poses
+#: (:mod:`runtime.kernels.skin`).
+SKINNING_METHOD_ATTR = "primvars:skel:skinningMethod"
+SKINNING_METHODS = ("classicLinear", "dualQuaternion")
+
+
+def skinning_method(prim) -> str:
+    """The authored ``primvars:skel:skinningMethod`` of ``prim`` as a str (``"classicLinear"``
+    when not authored, UsdSkel's fallback); any other token is returned as is for the caller to
+    refuse (the runtime) or report (the validator)."""
+    attr = prim.GetAttribute(SKINNING_METHOD_ATTR)
+    v = attr.Get() if attr and attr.HasAuthoredValue() else None
+    return SKINNING_METHODS[0] if v is None else str(v)
+
+
 #: Prim names under the SkelRoot.
 SKELETON_NAME = "Skeleton"
 COLLIDER_NAME = "Collider"
@@ -203,6 +219,49 @@ def face_owner(face_count: int, face_offsets, faces) -> np.ndarray:
     part_of = np.repeat(np.arange(len(face_offsets) - 1), np.diff(face_offsets))
     owner[faces[::-1]] = part_of[::-1]  # the first part wins
     return owner
+
+
+# ------------------------------------------------------------------------------ triangles
+#: A triangle whose bind-pose area is at most ``(ZERO_AREA_RELATIVE x model size)^2`` has zero area
+#: (the model size: the diagonal of the bind-pose bounding box of all the collider's points).  The
+#: validator's COL204 flags it; the importer's ``degenerate`` stage drops it (with a margin,
+#: ``pipeline.tolerances.DEGENERATE_MARGIN``) so that no asset it writes can trip the rule.
+ZERO_AREA_RELATIVE = 1e-7
+
+
+def bind_model_size(bind_points) -> float:
+    """The model size of the tolerances: the diagonal of the bounding box of the finite rows of
+    ``bind_points`` (n, 3); 1.0 when there are none or the box is degenerate."""
+    p = np.asarray(bind_points, dtype=np.float64)
+    p = p[np.all(np.isfinite(p), axis=1)] if len(p) else p
+    if len(p) == 0:
+        return 1.0
+    d = float(np.linalg.norm(p.max(0) - p.min(0)))
+    return d if d > 0 and np.isfinite(d) else 1.0
+
+
+def zero_area_faces(points, triangles, linear, model_size: float,
+                    relative: float = ZERO_AREA_RELATIVE) -> np.ndarray:
+    """(m,) bool: the triangles whose bind-pose area is at most ``(relative x model_size)^2``, the
+    one test of COL204 (repeated vertex indices included: their area is exactly 0).
+
+    The area is ``|L e1 x L e2| / 2`` for the edge vectors ``e1 = p1 - p0``, ``e2 = p2 - p0`` of the
+    points as stored (``points`` (n, 3), float32 in an asset) taken in float64, and ``L`` (3, 3)
+    the linear part of the map to the bind pose (skeleton world @ geomBindTransform): the translation
+    cancels in the edges, so the importer (before the roots' scale moves onto the Skeleton) and the
+    validator (after) compute it from the same stored numbers.  A non-finite area is not flagged
+    (COL203 reports non-finite points)."""
+    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if len(t) == 0:
+        return np.zeros(0, bool)
+    p = np.asarray(points, dtype=np.float64)
+    L = np.asarray(linear, dtype=np.float64)[:3, :3]
+    with np.errstate(all="ignore"):
+        e1 = (p[t[:, 1]] - p[t[:, 0]]) @ L.T
+        e2 = (p[t[:, 2]] - p[t[:, 0]]) @ L.T
+        area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+        area = np.where(np.isfinite(area), area, np.inf)
+        return area <= (float(relative) * float(model_size)) ** 2
 
 
 @dataclass

@@ -255,12 +255,7 @@ class LoadedAsset:
         """Diagonal of the bind-pose bounding box (1.0 when empty or degenerate)."""
         if self.points is None or len(self.points) == 0:
             return 1.0
-        p = self.bind_points
-        p = p[np.all(np.isfinite(p), axis=1)]
-        if len(p) == 0:
-            return 1.0
-        d = float(np.linalg.norm(p.max(0) - p.min(0)))
-        return d if d > 0 and np.isfinite(d) else 1.0
+        return schema.bind_model_size(self.bind_points)  # the importer's degenerate stage uses it too
 
     @cached_property
     def joint_index(self) -> dict:
@@ -509,6 +504,8 @@ class LoadedAsset:
                 return ok, why
         if self.blend_shapes:
             return False, f"the mesh has UsdSkel blend shapes ({self.blend_shapes}), which the proof does not model"
+        if self.skinning_method not in schema.SKINNING_METHODS:
+            return False, f"the mesh's skinning method {self.skinning_method!r} is not one the runtime poses (COL312)"
         try:
             for c in self.clips:
                 self.clip_data(c)
@@ -534,10 +531,17 @@ class LoadedAsset:
         return cache[clip.name]
 
     @cached_property
+    def skinning_method(self) -> str:
+        """The mesh's ``primvars:skel:skinningMethod`` (``classicLinear`` when not authored; any
+        other token as authored: :func:`runtime.schema.skinning_method`)."""
+        return schema.skinning_method(self.mesh) if self.mesh is not None else "classicLinear"
+
+    @cached_property
     def rig(self):
         """The asset as :class:`runtime.certify.Rig` (needs ``ready("proof")``)."""
         from colossus.runtime.certify import Rig
 
         poff, pverts = self.part_vertices
         return Rig(self.points, self.jidx, self.jw, self.geom_bind, self.bind, self.rest, self.parents,
-                   self.part_joint_ids, self.part_centers, self.part_radii, poff, pverts, self.skel_world)
+                   self.part_joint_ids, self.part_centers, self.part_radii, poff, pverts, self.skel_world,
+                   skinning_method=self.skinning_method)

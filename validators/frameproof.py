@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from colossus.runtime import certify as C
+from colossus.runtime.certify_dq import certificate  # the skinning method's continuous certificate
 from colossus.runtime.kernels.skin import part_farthest, skin_frames  # noqa: F401  (the one skinning kernel)
 
 from . import tolerances as tol
@@ -59,6 +60,18 @@ def skinning_transforms(skel, inv_bind, geom_bind=None, world=None) -> np.ndarra
     if world is not None:
         m = np.asarray(world, dtype=np.float64) @ m
     return m
+
+
+def skin_layout(skel, inv_bind, geom_bind=None, world=None, method: str = "classicLinear") -> np.ndarray:
+    """The one kernel's folded transforms for skinning by ``method`` (the asset's
+    ``primvars:skel:skinningMethod``): :func:`skinning_transforms` folded for linear blend; the
+    dual-quaternion layout (:func:`runtime.kernels.skin.fold_dq`: skinning in skeleton space,
+    ``geom_bind`` before and ``world`` after) otherwise."""
+    from colossus.runtime.kernels.skin import fold_method
+    skel = np.asarray(skel, dtype=np.float64)
+    if skel.ndim == 3:
+        skel = skel[None]
+    return fold_method(method, skel @ np.asarray(inv_bind, dtype=np.float64), geom_bind, world)
 
 
 def world_spheres(joint_xforms, part_joints, centers, radii):
@@ -241,7 +254,7 @@ def prove(asset, subframes: int = 0, chunk_frames: int | None = None, clips=None
         proof.clip_ranges[clip.name] = (float(clip.times[0]), float(clip.times[-1]))
         if continuous and len(clip.times) > 1:
             tc = _time.perf_counter()
-            c = C.continuous(rig, asset.clip_data(clip), clip.times, fbound, fok, tolerance, tol.CONTAIN_RADIUS)
+            c = certificate(rig, asset.clip_data(clip), clip.times, fbound, fok, tolerance, tol.CONTAIN_RADIUS)
             for k, name in enumerate(INTERVAL_NAMES):
                 proof.intervals[name] += int((c.status == k).sum())
             for f in c.failures:

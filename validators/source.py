@@ -74,7 +74,7 @@ def compare_source(asset, source_path, chunk_frames: int = 64) -> SourceCheck:
     from colossus.pipeline.run import build_collider, read_baked, settings_from_provenance, sha256_of
     from scipy.spatial import cKDTree
 
-    from .frameproof import skin_frames, skinning_transforms
+    from .frameproof import skin_frames, skin_layout
 
     src = os.fspath(source_path)
     prov = provenance(asset)
@@ -132,7 +132,7 @@ def compare_source(asset, source_path, chunk_frames: int = 64) -> SourceCheck:
         for f0 in range(0, len(clip.times), chunk):
             times = clip.times[f0:f0 + chunk]
             skel = asset.skel_transforms(asset.anim_local(clip, times))
-            xf = skinning_transforms(skel, inv_bind, asset.geom_bind, asset.skel_world)
+            xf = skin_layout(skel, inv_bind, asset.geom_bind, asset.skel_world, asset.skinning_method)
             pa = skin_frames(asset.points, asset.jidx, asset.jw, xf).astype(np.float64)
             if f0 == 0:
                 fin = pa[0][np.all(np.isfinite(pa[0]), axis=1)]
@@ -150,7 +150,7 @@ def compare_source(asset, source_path, chunk_frames: int = 64) -> SourceCheck:
             v = int(np.argmax(best_c))
             # locate the frame of the worst vertex (one more pass over its candidate only)
             skel = asset.skel_transforms(asset.anim_local(clip, clip.times))
-            xf = skinning_transforms(skel, inv_bind, asset.geom_bind, asset.skel_world)
+            xf = skin_layout(skel, inv_bind, asset.geom_bind, asset.skel_world, asset.skinning_method)
             pa = skin_frames(asset.points[v:v + 1], asset.jidx[v:v + 1], asset.jw[v:v + 1], xf)[:, 0]
             ps = skin_points(m, skel_transforms(sc.local, m.parents))[:, cand[v, choice[v]]]
             e = np.linalg.norm(pa - ps, axis=1)

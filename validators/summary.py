@@ -75,7 +75,8 @@ def summarize(asset: LoadedAsset) -> dict:
     ``maxDeviation``, ``measuredDeviation``, ``worstClip``, ``worstFrame``, ``worstBone``,
     ``worstDirection``; None for a full mesh) and ``not_carried`` (what the importer met in the
     source and did not carry exactly: ``[{"what", "where", "detail", "bound_relative"}]``, from
-    the provenance's ``notCarried``; empty when nothing).
+    the provenance's ``notCarried``; empty when nothing) and ``skinning_method`` (the mesh's
+    ``primvars:skel:skinningMethod``, ``classicLinear`` when not authored).
     """
     stage = asset.stage
     tcps = float(stage.GetTimeCodesPerSecond())
@@ -141,6 +142,7 @@ def summarize(asset: LoadedAsset) -> dict:
         prov = _plain(dict(asset.mesh.GetCustomData().get(schema.PROVENANCE_KEY, {}) or {}))
     out["provenance"] = prov
     out["model_size"] = float(asset.model_size) if asset.points is not None else None
+    out["skinning_method"] = schema.skinning_method(asset.mesh) if asset.mesh is not None else None
     out["proxy"] = None
     if asset.mesh is not None and isinstance(asset.mesh.GetCustomDataByKey(schema.PROXY_KEY), dict):
         g = asset.mesh.GetCustomDataByKey
@@ -175,6 +177,9 @@ def format_summary(s: dict) -> str:
     lines.append(f"  counts    {_fmt(c['vertices'])} vertices, {_fmt(c['triangles'])} triangles, "
                  f"{_fmt(c['joints'])} joints, {_fmt(c['parts'])} parts, {c['clips']} clips "
                  f"({c['frames']} frames), influences {itext}")
+    if s.get("skinning_method"):
+        lines.append(f"  skinning  {s['skinning_method']}"
+                     + ("" if s["skinning_method"] in schema.SKINNING_METHODS else " (not a method the runtime poses)"))
     if s["provenance"]:
         p = s["provenance"]
         lines.append("")

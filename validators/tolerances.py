@@ -4,6 +4,8 @@ Lengths named ``*_RELATIVE`` are fractions of the model size: the diagonal of th
 bounding box of the collider's points, in stage units.
 """
 
+from colossus.runtime import schema as _schema
+
 #: Influence weights of a vertex must sum to 1 within this (absolute).
 WEIGHT_SUM = 1e-4
 #: Weights below ``-WEIGHT_NEGATIVE`` count as negative (float noise is tolerated).
@@ -12,8 +14,9 @@ WEIGHT_NEGATIVE = 1e-7
 MAX_INFLUENCES = 4
 #: Two distinct vertices closer than this are unwelded duplicates.
 WELD_RELATIVE = 1e-6
-#: A triangle whose area is below (this x model size)^2 is zero-area.
-ZERO_AREA_RELATIVE = 1e-7
+#: A triangle whose area is at most (this x model size)^2 is zero-area (COL204; the one value,
+#: shared with the importer's ``degenerate`` stage, lives in ``runtime.schema``).
+ZERO_AREA_RELATIVE = _schema.ZERO_AREA_RELATIVE
 #: A vertex lies inside its sphere when its distance to the centre exceeds the radius by at most
 #: ``CONTAIN_RELATIVE x model size + CONTAIN_RADIUS x radius`` (float32 skinning noise).
 CONTAIN_RELATIVE = 1e-6

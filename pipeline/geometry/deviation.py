@@ -135,6 +135,11 @@ def deviation(full: SkinnedMesh, proxy: SkinnedMesh, poses: Poses | None = None,
     """
     poses = poses or mesh_poses(full)
     size = model_scale(rest_skel(full))
+    if full.skinning_method != "classicLinear":  # the one kernel's layout for the mesh's method
+        from colossus.runtime.kernels.skin import fold_method
+        G = full.geom_bind
+        poses = Poses(fold_method(full.skinning_method, poses.mats @ np.linalg.inv(G), G), poses.clip, poses.frame,
+                      poses.time)
     F = len(poses.mats)
     nv = full.vertex_count + proxy.vertex_count
     cache = {}

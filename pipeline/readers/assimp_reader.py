@@ -96,7 +96,7 @@ def _fbx_rate(fbx) -> float | None:
     return custom if custom > 0 else None
 
 
-def read_scene(path, budget, fbx) -> Scene:
+def read_scene(path, budget, fbx, doc=None) -> Scene:
     """Read any file assimp imports into a :class:`Scene`."""
     import assimp_py
 
@@ -132,7 +132,7 @@ def read_scene(path, budget, fbx) -> Scene:
         for mi in mlist:
             mesh_node.setdefault(mi, ni)
 
-    morph = read_morph_geometry(path) if ext == ".fbx" else {}
+    morph = read_morph_geometry(doc) if ext == ".fbx" else {}
     collada = read_skins(path) if ext == ".dae" else {}
     mended = []
     meshes = []
@@ -183,7 +183,7 @@ def read_scene(path, budget, fbx) -> Scene:
                                 skin=skin, morph_targets=morph.get(m.name, 0) or morph.get(names[node] if node >= 0 else "", 0)))
 
     hint = _fbx_rate(fbx) if ext == ".fbx" else None
-    stacks = read_anim_stacks(path) if ext == ".fbx" else {}
+    stacks = read_anim_stacks(doc) if ext == ".fbx" else {}
     dae_clips = read_clips(path) if ext == ".dae" else []
     anims = []
     is_ogre = ogre.is_ogre(path)  # Ogre plays rotations by nlerp (RIM_LINEAR), assimp's keys are its own
@@ -234,7 +234,7 @@ def read_scene(path, budget, fbx) -> Scene:
     if mended:
         notes.append(f"assimp's skin weights of {', '.join(mended)} did not follow the file's <vertex_weights> "
                      "(a known assimp error on Collada <polygons>): the file's own weights were used")
-    rrs = _segment_scale_nodes(names, nparents, read_inherit_types(path)) if ext == ".fbx" else {}
+    rrs = _segment_scale_nodes(names, nparents, read_inherit_types(doc)) if ext == ".fbx" else {}
     return Scene(names=[n.split(FBX_HELPER)[0] for n in names], parents=nparents, local=nlocal, meshes=meshes,
                  notes=notes,
                  animations=anims, helpers=helpers, fps_hint=hint, unweighted_follow_node=True,
@@ -319,17 +319,17 @@ def read_assimp(path, meshes=None, fps=None):
         why = fbx_checks.refusal(fbx_doc.file_version(path))
         if why:
             raise InputError(path, why)
-    fbx = read_global_settings(path) if ext == ".fbx" else {}
+    doc = fbx_doc.read_document(path) if ext == ".fbx" else None  # one parse for every FBX read here
+    fbx = read_global_settings(doc) if ext == ".fbx" else {}
     skeleton = None
     if ogre.is_ogre(path):  # the skeleton it names: inside its folder, and present (assimp drops a missing one)
         skeleton = ogre.check_skeleton(path)
-    scene = read_scene(path, budget, fbx)
+    scene = read_scene(path, budget, fbx, doc)
     up, mpu, note = _source_frame(path, ext, fbx)
     mesh = build(scene, path, meshes=meshes, fps=fps, budget=budget,
                  source={"file": os.path.basename(path), "format": ext.lstrip("."), "reader": "assimp",
                          "frame": note})
     if ext == ".fbx":  # what the file says about deforming that assimp does not carry (fail closed)
-        doc = fbx_doc.read_document(path)
         items = fbx_checks.check(doc, mesh, scene)
         if mesh.source.get("morph_meshes") and doc is not None:
             try:

@@ -185,8 +185,9 @@ MALFORMED = (ValueError, TypeError, IndexError, KeyError, OverflowError, ZeroDiv
 
 
 #: The checks that still apply to the ufbx reader, which evaluates inherit types, pivots,
-#: geometric transforms and every curve at every frame itself (:mod:`.ufbx_reader`).
-UFBX_CHECKS = ("skinning_type", "constraints")
+#: geometric transforms and every curve at every frame itself, and carries the skinning type
+#: (:mod:`.ufbx_reader`).
+UFBX_CHECKS = ("constraints",)
 
 
 def unchecked(what: str, e: BaseException):

@@ -401,6 +401,8 @@ def _read_usd(path, meshes=None, fps=None):
                  source={"file": os.path.basename(path), "format": os.path.splitext(path)[1].lstrip(".").lower(),
                          "reader": "usd", "frame": f"USD stage: upAxis={up}, metersPerUnit={mpu:g}"})
     mesh.source["notes"] = notes + mesh.source["notes"]
+    method = _skinning_method(path, targets)
+    mesh = mesh.replace(skinning_method=method)
     items, inert = _not_carried(stage, cache, targets, mesh, early)
     if mesh.source.get("morph_meshes"):
         mesh.source["morph_meshes"] = {k: v for k, v in mesh.source["morph_meshes"].items() if k not in inert}
@@ -415,12 +417,33 @@ def _read_usd(path, meshes=None, fps=None):
 DQ_SAMPLES = 64
 
 
+def _skinning_method(path, targets) -> str:
+    """The one ``primvars:skel:skinningMethod`` of the collision mesh: the chosen meshes' own
+    when they agree; where they mix, the method of the most points (the others are listed as not
+    carried by :func:`_not_carried`, with usd-core's bound).  A token UsdSkel does not know is
+    refused (usd-core cannot skin it either)."""
+    from pxr import UsdGeom, UsdSkel
+
+    known = (str(UsdSkel.Tokens.classicLinear), str(UsdSkel.Tokens.dualQuaternion))
+    votes = {}
+    for _, q in targets:
+        m = str(q.GetSkinningMethod())
+        if m not in known:
+            raise InputError(path, f"mesh {q.GetPrim().GetPath()}: primvars:skel:skinningMethod {m!r} is not a "
+                             f"method UsdSkel skins ({', '.join(known)})")
+        pts = UsdGeom.Mesh(q.GetPrim()).GetPointsAttr().Get()
+        votes[m] = votes.get(m, 0) + (len(pts) if pts is not None else 0)
+    return max(known, key=lambda m: (votes.get(m, -1), m == known[0]))
+
+
 def _not_carried(stage, cache, targets, mesh, early):
     """``(records, inert)``: the :mod:`pipeline.notcarried` records of what UsdSkel says about the
-    chosen meshes that the collider does not carry (``primvars:skel:skinningMethod =
-    "dualQuaternion"``: bounded by usd-core's own dual-quaternion skinning against its linear
-    skinning at up to :data:`DQ_SAMPLES` of the animation's time codes), and the names of the
-    meshes whose blend shapes have weight 0 in every animation (nothing to carry)."""
+    chosen meshes that the collider does not carry (a ``primvars:skel:skinningMethod`` other than
+    the collision mesh's ``mesh.skinning_method``, where the chosen meshes mix methods: bounded by
+    usd-core's own dual-quaternion skinning against its linear skinning at up to
+    :data:`DQ_SAMPLES` of the animation's time codes; a mesh whose method is carried is not
+    listed), and the names of the meshes whose blend shapes have weight 0 in every animation
+    (nothing to carry)."""
     from pxr import Usd, UsdGeom, UsdSkel, Vt
     from .. import notcarried
     from .bounds import posed_size
@@ -453,8 +476,8 @@ def _not_carried(stage, cache, targets, mesh, early):
                     break
             if not live:
                 inert.append(prim.GetName())
-        if q.GetSkinningMethod() != UsdSkel.Tokens.dualQuaternion:
-            continue
+        if str(q.GetSkinningMethod()) == mesh.skinning_method:
+            continue  # carried
         sq = cache.GetSkelQuery(s)
         times = sorted({t for t in (sq.GetAnimQuery().GetJointTransformTimeSamples() if sq and sq.GetAnimQuery() else [])})
         if len(times) > DQ_SAMPLES:
@@ -486,6 +509,7 @@ def _not_carried(stage, cache, targets, mesh, early):
     if dq:
         items.append(notcarried.item(
             "usd_skinning_method", [n for n, _ in dq],
-            'primvars:skel:skinningMethod = "dualQuaternion": the collider is skinned linearly (bound: usd-core\'s '
-            "dual-quaternion against its linear skinning at the animation's time codes)", max(b for _, b in dq)))
+            f'the meshes mix primvars:skel:skinningMethod: the collider is skinned by {mesh.skinning_method!r} '
+            "(the method of most points; bound: usd-core's dual-quaternion against its linear skinning at the "
+            "animation's time codes)", max(b for _, b in dq)))
     return items, inert

@@ -2,7 +2,7 @@
 
 They are chained in one visible place, :func:`pipeline.run.import_asset`:
 
-    bake -> weld -> orient -> bind -> parts -> spheres -> write
+    bake -> weld -> degenerate -> orient -> bind -> [simplify] -> parts -> quantize -> spheres -> write
 """
 
 from __future__ import annotations

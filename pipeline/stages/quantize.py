@@ -1,8 +1,8 @@
 """Stage ``quantize``: the clips exactly as the asset stores them (float3 translations, quatf
-rotations, half3 scales, the roots' common scale on the Skeleton prim), with the bound of what
-that storage moves any vertex.  It runs before ``spheres`` so the spheres are proven on the motion
-the asset really has; ``write`` stores its values as they are.  This is the one place a clip's
-root scale is divided out and its quaternions are put in one hemisphere.
+rotations, half3 scales; the roots' common scale folded into the joints' translations), with the
+bound of what that storage moves any vertex.  It runs before ``spheres`` so the spheres are proven
+on the motion the asset really has; ``write`` stores its values as they are.  This is the one
+place the roots' common scale is folded and a clip's quaternions are put in one hemisphere.
 """
 
 from __future__ import annotations
@@ -20,8 +20,10 @@ def root_scale(mesh: SkinnedMesh) -> float:
     frame of every clip, or 1.0.  Dividing it out is exact; what remains of the roots' scales
     (1 where the roots carried only ``k``) goes into the animation.
 
-    The writer moves it onto the Skeleton prim (``xformOp:scale``, double precision), out of the
-    SkelAnimation's ``half3`` scales, where it would be rounded (``half(0.01) / 0.01 = 1 + 2.1e-4``).
+    :func:`fold_root_scale` folds it into the joints' translations, out of the SkelAnimation's
+    ``half3`` scales, where it would be rounded (``half(0.01) / 0.01 = 1 + 2.1e-4``), and off the
+    Skeleton prim (a unit scale there is composed by usd-core but applied to other objects by
+    Blender's USD importer: the contract says no unit scale sits on the Skeleton prim).
     """
     roots = np.flatnonzero(mesh.parents < 0)
     if not len(roots):
@@ -35,6 +37,35 @@ def root_scale(mesh: SkinnedMesh) -> float:
     if not (np.isfinite(k) and k > 0) or abs(k - 1.0) < 1e-12:
         return 1.0
     return k
+
+
+def fold_root_scale(mesh: SkinnedMesh, k: float) -> SkinnedMesh:
+    """``mesh`` with the roots' uniform scale ``k`` folded into the translations: the same skinned
+    points at every frame, exactly, with no ``k`` anywhere in a joint's scale.
+
+    With ``K = k I`` (uniform, so it commutes with rotations), a root's local transform is
+    ``L_r = L'_r K`` (``L'_r``: its linear part divided by ``k``, translation kept) and for any
+    affine ``L = [A | t]``, ``K L = [A | k t] K``.  Moving ``K`` down each chain, a joint's
+    skeleton-space transform is ``W_j = W'_j K`` where ``W'_j`` composes ``L'_r`` and the
+    descendants' locals with their translations times ``k``; the bind transforms likewise
+    ``B_j = B'_j K``.  Skinning uses ``W_j B_j^-1 = W'_j K K^-1 B'_j^-1 = W'_j B'_j^-1``: unchanged,
+    and the points stay where they are.  A joint's own space is ``k`` times larger (``q' = k q``),
+    so the spheres, computed after this, are in it.
+    """
+    if k == 1.0:
+        return mesh
+    roots = mesh.parents < 0
+    unscale = np.diag([1.0 / k, 1.0 / k, 1.0 / k, 1.0])
+
+    def locals_(local):
+        out = local.copy()
+        out[..., roots, :3, :3] /= k
+        out[..., ~roots, :3, 3] *= k
+        return out
+
+    clips = tuple(type(c)(c.name, c.times, locals_(c.local)) for c in mesh.clips)
+    return mesh.replace(bind_transforms=mesh.bind_transforms @ unscale,
+                        rest_transforms=locals_(mesh.rest_transforms), clips=clips)
 
 
 def _joint_local_points(mesh: SkinnedMesh):
@@ -151,13 +182,14 @@ def _posed_size(mesh: SkinnedMesh, local: np.ndarray) -> float:
     joint-local transforms ``local`` (b, 4, 4): the model as a clip moves it (bind-space positions
     can be at another scale: lumberjack's mesh is authored in centimetres, bound by x100 binds,
     and moved in metres)."""
-    from colossus.runtime.kernels.skin import skin_frames
+    from colossus.runtime.kernels.skin import fold_method, skin_frames
 
     from ..model import skel_transforms
     from ..tolerances import model_scale
 
-    mats = skel_transforms(local, mesh.parents) @ np.linalg.inv(mesh.bind_transforms) @ mesh.geom_bind
-    return model_scale(skin_frames(mesh.positions, mesh.joint_indices, mesh.joint_weights, mats[None],
+    mats = fold_method(mesh.skinning_method, skel_transforms(local, mesh.parents) @ np.linalg.inv(mesh.bind_transforms),
+                       mesh.geom_bind)
+    return model_scale(skin_frames(mesh.positions, mesh.joint_indices, mesh.joint_weights, mats,
                                    dtype=np.float64)[0])
 
 
@@ -189,16 +221,15 @@ def quantize(mesh: SkinnedMesh):
     ``half3`` (the SkelAnimation schema's types).  The spheres must be computed on the motion the
     asset really has, so this stage rounds the clips the way :func:`_store_clip` does (the
     translations corrected for the rounded scales) before the ``spheres`` stage; ``write`` then
-    stores exactly these values.  The roots' common scale (:func:`root_scale`) is taken out here,
-    once, and goes onto the Skeleton prim, so it is not rounded.
+    stores exactly these values.  The roots' common scale (:func:`root_scale`) is folded into the
+    translations first, once (:func:`fold_root_scale`: exact), so it is never rounded.
 
     Returns the mesh with
-    * ``clips``: the rounded joint-local transforms (the roots' scale ``k`` kept), for the stages
-      that pose matrices;
+    * bind, rest and clip transforms with the roots' scale folded;
+    * ``clips``: the rounded joint-local transforms, for the stages that pose matrices;
     * ``stored_clips``: one :class:`runtime.schema.Clip` per clip, the TRS values the writer stores
-      (roots without ``k``; quaternions in one hemisphere), which the spheres' certificate and the
-      writer read;
-    * ``root_scale``: ``k``;
+      (quaternions in one hemisphere), which the spheres' certificate and the writer read;
+    * ``root_scale``: 1 (the scale is folded; the report's ``root_scale`` says what was folded);
     * each clip's ``clip_info`` entry (in ``mesh.source``) with ``storage_error_relative``: the
       bound of :func:`_store_clip` on how far storage moves any vertex, over the model size (as
       the clip's first frame poses it, :func:`_posed_size`);
@@ -207,22 +238,18 @@ def quantize(mesh: SkinnedMesh):
     from colossus.runtime.schema import Clip
 
     k = root_scale(mesh)
-    roots = mesh.parents < 0
+    mesh = fold_root_scale(mesh, k)
     centers, dist = _joint_local_points(mesh)
     clips, stored, bounds = [], [], {}
     for c in mesh.clips:
-        local = c.local.copy()
-        local[:, roots, :3, :] /= k
-        t, q, s, norms = _store_clip(local, mesh.parents, centers)
-        out = compose_trs(t, q, s)
-        out[:, roots, :3, :] *= k
-        clips.append(type(c)(c.name, c.times, out))
+        t, q, s, norms = _store_clip(c.local, mesh.parents, centers)
+        clips.append(type(c)(c.name, c.times, compose_trs(t, q, s)))
         stored.append(Clip.on_grid(c.name, c.times, *_as_stored(t, q, s)))
-        bounds[c.name] = (_storage_bound(norms, mesh.joint_indices, mesh.joint_weights, dist) * abs(k)
+        bounds[c.name] = (_storage_bound(norms, mesh.joint_indices, mesh.joint_weights, dist)
                           / _posed_size(mesh, c.local[0]))
     info = [dict(i, storage_error_relative=bounds[i["name"]]) if i.get("name") in bounds else i
             for i in mesh.source.get("clip_info", [])]
-    out = mesh.replace(clips=tuple(clips), stored_clips=tuple(stored), root_scale=k,
+    out = mesh.replace(clips=tuple(clips), stored_clips=tuple(stored), root_scale=1.0,
                        source=dict(mesh.source, clip_info=info))
     rep = StageReport("quantize", counts={"clips": len(clips), "root_scale": k,
                                           "storage_error_relative": max(bounds.values(), default=0.0)})

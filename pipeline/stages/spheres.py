@@ -46,7 +46,7 @@ from colossus.pipeline.geometry.minsphere import largest_min_sphere, min_sphere
 from colossus.pipeline.model import SkinnedMesh, Parts, skel_transforms
 from colossus.pipeline.stages import StageReport
 from colossus.pipeline.tolerances import SPHERE_PAD_RADIUS, SPHERE_PAD_RELATIVE, model_scale
-from colossus.runtime import certify
+from colossus.runtime import certify, certify_dq
 from colossus.runtime.kernels import skin as SK
 from colossus.runtime.schema import part_vertex_csr
 
@@ -130,6 +130,7 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     shear = shear.max(axis=0) * (1.0 + 1e-12)  # (b,)
     to_skel = S @ np.linalg.inv(mesh.bind_transforms)[None] @ mesh.geom_bind  # (F, b, 4, 4)
     inv_S = np.linalg.inv(S)
+    skin_skel = S @ np.linalg.inv(mesh.bind_transforms)[None]  # the dual-quaternion layout's skinning transforms
     G = mesh.geom_bind
     rest = mesh.positions.astype(np.float64) @ G[:3, :3].T + G[:3, 3]
     abs_pad = SPHERE_PAD_RELATIVE * model_scale(rest)
@@ -146,7 +147,8 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
         j = int(parts_in.joints[p])
         verts = np.unique(mesh.triangles[parts_in.part_faces(p)].ravel())
         pos, ji, jw = pos_all[verts], ji_all[verts], jw_all[verts]
-        mats = SK.fold(inv_S[:, j, None] @ to_skel)
+        mats = (SK.fold(inv_S[:, j, None] @ to_skel) if mesh.skinning_method == SK.CLASSIC_LINEAR else
+                SK.fold_method(mesh.skinning_method, skin_skel, G, world=inv_S[:, j]))
         pts = SK.skin_frames(pos, ji, jw, mats, dtype=np.float64)  # (F, nv, 3) joint space
         center, r = min_sphere(pts.reshape(-1, 3))
         tight = largest_min_sphere(pts if len(slack_idx) == len(S) else pts[slack_idx], center, rel=TIGHT_REL)
@@ -202,15 +204,10 @@ def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
     if not mesh.clips or P == 0:
         return need
     voff, verts = part_vertex_csr(mesh.triangles, parts_in.face_offsets, parts_in.faces, mesh.vertex_count)
-    # the rig exactly as the writer lays it out: the roots' common scale k on the Skeleton prim
-    k = mesh.root_scale
-    roots = mesh.parents < 0
-    unscale = np.diag([1.0 / k, 1.0 / k, 1.0 / k, 1.0])
-    rest = mesh.rest_transforms.copy()
-    rest[roots] = unscale @ rest[roots]
-    rig = certify.Rig(mesh.positions, mesh.joint_indices, mesh.joint_weights, unscale @ mesh.geom_bind,
-                      unscale @ mesh.bind_transforms, rest, mesh.parents, np.asarray(parts_in.joints),
-                      centers.astype(np.float64), target, voff, verts, world=np.diag([k, k, k, 1.0]))
+    # the rig exactly as the writer lays it out (the roots' scale folded by quantize)
+    rig = certify.Rig(mesh.positions, mesh.joint_indices, mesh.joint_weights, mesh.geom_bind,
+                      mesh.bind_transforms, mesh.rest_transforms, mesh.parents, np.asarray(parts_in.joints),
+                      centers.astype(np.float64), target, voff, verts, skinning_method=mesh.skinning_method)
     start = 1  # pose 0 is the bind pose
     for clip, stored in zip(mesh.clips, mesh.stored_clips, strict=True):
         n = clip.frame_count
@@ -218,7 +215,7 @@ def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
         start += n
         if n < 2:
             continue
-        c = certify.continuous(rig, stored, clip.times, far,
+        c = certify_dq.certificate(rig, stored, clip.times, far,
                                np.ones_like(far, bool), 0.0, 0.0, rho=target, growth=True,
                                max_depth=GROWTH_DEPTH, frame_bound_space="joint")
         # a J-space bound U certifies a radius r where U <= r * ratio (non-uniform scales on the

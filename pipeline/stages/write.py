@@ -6,25 +6,29 @@ Layout (``<Name>`` is the source file's stem made a valid identifier)::
     /<Name>/Skeleton        Skeleton: joints, bindTransforms, restTransforms,
                             skel:animationSource -> the first clip
     /<Name>/Collider        Mesh: triangles, rightHanded, UsdSkelBindingAPI (jointIndices /
-                            jointWeights, elementSize = max influences), PhysicsCollisionAPI,
+                            jointWeights, elementSize = max influences; skinningMethod
+                            "dualQuaternion" where the source skins so), PhysicsCollisionAPI,
                             PhysicsMeshCollisionAPI (approximation "none"), colossus:parts:*,
                             customData["colossus"] = provenance
     /<Name>/<clip>          SkelAnimation per clip, one time sample per source frame
 
 The file is written to a temporary name in the output directory, re-opened with usd-core and
-checked (:func:`_check_written`), and only then renamed into place: a failed import never leaves
-a partial asset behind, and nothing usd-core cannot open is ever written.
+checked (:func:`_check_written`), then handed to the caller's ``check`` (the command line runs the
+validator's error rules on it: the pipeline, a floor below the validators, cannot import them), and
+only then renamed into place: a failed import never leaves a partial asset behind, nothing usd-core
+cannot open is ever written, and nothing the caller's check refuses either.
 """
 
 from __future__ import annotations
 
 import os
+import time
 
 import numpy as np
 
 from colossus.runtime import schema
 
-from ..errors import OutputError
+from ..errors import InputError, OutputError
 from ..tempfiles import clean_stale, temp_path
 from ..model import SkinnedMesh
 from . import StageReport
@@ -71,7 +75,7 @@ def check_output_path(out_path) -> str:
     return out
 
 
-def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
+def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None, check=None):
     """Write ``mesh`` (baked, welded, oriented, bound, with parts and spheres) as a USD asset.
 
     Parameters
@@ -83,6 +87,11 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
     provenance : dict, optional
         Stored in the collider mesh's ``customData["colossus"]`` (source, sourceSha256,
         importer, settings).
+    check : callable, optional
+        ``check(path) -> None | str`` run on the temporary file, fully written and re-opened,
+        before the rename: a string is the one-line reason to refuse the asset (the command line
+        passes the validator's error rules: ``"COL204: 2 triangles have zero area ..."``), raised as
+        :class:`InputError` naming the source, with nothing written.
 
     Returns
     -------
@@ -125,18 +134,12 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         jpaths = joint_paths(mesh.joint_names, mesh.parents)
         skel.CreateJointsAttr(Vt.TokenArray(jpaths))
         skel.CreateJointNamesAttr(Vt.TokenArray(list(mesh.joint_names)))
-        # the roots' common scale goes onto the Skeleton prim in double precision
-        # (quantize.root_scale: the stored clips have it taken out already)
-        k = mesh.root_scale
-        roots = mesh.parents < 0
-        unscale = np.diag([1.0 / k, 1.0 / k, 1.0 / k, 1.0])
-        bind_k = unscale @ mesh.bind_transforms
-        rest_k = mesh.rest_transforms.copy()
-        rest_k[roots] = unscale @ rest_k[roots]
-        if k != 1.0:
-            UsdGeom.Xformable(skel.GetPrim()).AddScaleOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(k, k, k))
-        skel.CreateBindTransformsAttr(schema.matrices_to_usd(bind_k))
-        skel.CreateRestTransformsAttr(schema.matrices_to_usd(rest_k))
+        # no unit scale on the Skeleton prim: quantize folded the roots' common scale into the
+        # translations (quantize.fold_root_scale)
+        if mesh.root_scale != 1.0:
+            raise ValueError("write: the roots' scale is not folded (run the quantize stage first)")
+        skel.CreateBindTransformsAttr(schema.matrices_to_usd(mesh.bind_transforms))
+        skel.CreateRestTransformsAttr(schema.matrices_to_usd(mesh.rest_transforms))
 
         # -- clips ---------------------------------------------------------------------------
         taken = set(RESERVED)
@@ -178,9 +181,10 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         k = mesh.joint_indices.shape[1]
         binding.CreateJointIndicesPrimvar(False, k).Set(Vt.IntArray.FromNumpy(mesh.joint_indices.reshape(-1).astype(np.int32)))
         binding.CreateJointWeightsPrimvar(False, k).Set(Vt.FloatArray.FromNumpy(mesh.joint_weights.reshape(-1).astype(np.float32)))
-        geom_bind = unscale @ mesh.geom_bind  # points stay where they are; skeleton space is scaled by k
-        if not np.allclose(geom_bind, np.eye(4), rtol=0, atol=1e-12):
-            binding.CreateGeomBindTransformAttr(schema.matrices_to_usd(geom_bind))
+        if mesh.skinning_method != UsdSkel.Tokens.classicLinear:  # UsdSkel's default is linear
+            binding.CreateSkinningMethodAttr().Set(mesh.skinning_method)
+        if not np.allclose(mesh.geom_bind, np.eye(4), rtol=0, atol=1e-12):
+            binding.CreateGeomBindTransformAttr(schema.matrices_to_usd(mesh.geom_bind))
         UsdPhysics.CollisionAPI.Apply(geo.GetPrim())
         UsdPhysics.MeshCollisionAPI.Apply(geo.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.none)
 
@@ -194,6 +198,13 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         stage.GetRootLayer().Save()
         del stage
         _check_written(tmp, out, root_path, tcps)
+        checked = None
+        if check is not None:
+            t_check = time.perf_counter()
+            refusal = check(tmp)
+            checked = time.perf_counter() - t_check
+            if refusal:
+                raise InputError(mesh.source.get("path") or mesh.source.get("file") or out, refusal)
         os.replace(tmp, out)
     except OSError as exc:
         _unlink(tmp)
@@ -205,8 +216,11 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None):
         _unlink(tmp)
         raise
     size = os.path.getsize(out)
-    return mesh, StageReport("write", counts={"path": out, "bytes": size, "clips": len(mesh.clips),
-                                              "joints": mesh.joint_count, "parts": len(parts)})
+    counts = {"path": out, "bytes": size, "clips": len(mesh.clips), "joints": mesh.joint_count, "parts": len(parts),
+              "skinning_method": mesh.skinning_method}
+    if checked is not None:
+        counts["check_seconds"] = checked
+    return mesh, StageReport("write", counts=counts)
 
 
 def _clip_source(info: dict, mesh: SkinnedMesh) -> dict:

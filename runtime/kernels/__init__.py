@@ -9,6 +9,10 @@ or ``tests/references/naive_queries.py``):
   and D, the culling spheres);
 * :mod:`~runtime.kernels.interval`: sound bounds between two samples (deviation from the chord:
   the continuous certificate);
+* :mod:`~runtime.kernels.subdivide`: the continuous certificate's levels B and C batched (one
+  kernel per subdivision level over every open node);
+* :mod:`~runtime.kernels.farthest`: the sampled proof's exact tier by chunks of vertices (chunk
+  bounds, then exact skinning of the chunks that can hold the farthest vertex);
 * :mod:`~runtime.kernels.query`: rays, sphere contacts, surface points;
 * :mod:`~runtime.kernels.triangle`: the ray-triangle and closest-point-on-triangle primitives
   (public: the query kernels and the import's surface distance share them);

@@ -153,7 +153,7 @@ def _chain_bounds_parallel(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, 
 #: Below this many path factors in all (intervals x factors) :func:`chain_bounds` runs the
 #: vectorised numpy recursion (:func:`_chain_bounds_numpy`): a demo-sized clip takes a few
 #: milliseconds so, and not compiling saves ~1.2 s of a cold start.
-CHAIN_KERNEL_MIN = 100_000
+CHAIN_KERNEL_MIN = 4_000
 
 
 def chain_bounds(L0, L1, Li0, Li1, fw, iv, dt, eps, path_off, path_j, path_dir, pj_center, pj_radius, pair_part, part_centers, e0, e1, delta, lam, pert, compiled=None):
@@ -425,7 +425,7 @@ def _factor_terms(L, t, q, s, anim, omega_margin, alpha_margin, half_rel, Li, fw
 #: the compiled kernel: a demo-sized clip is done in well under a millisecond either way, and not
 #: compiling saves ~1.5 s of a cold start (``tools/compile-profile``); the benchmark's 500 frames x
 #: 40 joints take the kernel (4x faster there).
-FACTOR_KERNEL_MIN = 8_000
+FACTOR_KERNEL_MIN = 900
 
 
 def factor_terms(L, t, q, s, anim, rest_local, omega_margin: float, alpha_margin: float, compiled=None):

@@ -196,7 +196,7 @@ def _compose(local, parents, topo_order, inv_bind, geom_bind, local_to_world, sk
 #: of the compiled kernel: the proof's per-clip calls on a demo-sized asset take well under a
 #: millisecond either way, and not compiling saves ~1.8 s of a cold start.  (The runtime's
 #: per-frame pose calls the kernel directly.)
-LOCALS_KERNEL_MIN = 4096
+LOCALS_KERNEL_MIN = 900
 
 
 def locals_at(clip, times, rest_local, trs=False, compiled=None):

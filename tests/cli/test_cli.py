@@ -64,9 +64,11 @@ def test_readme_import_example_and_json(tmp_path):
     assert r.exit_code == 0, r.output
     assert r.stderr == ""
     s = json.loads(r.stdout)
-    assert s["vertices_in"] == 20464 and s["vertices_out"] == 5056
+    assert s["vertices_in"] == 5056 and s["vertices_out"] == 5056  # ufbx reads control points
     assert s["faces_flipped"] == 0 and s["parts"] == 16 and s["clips"] == 2 and s["frames"] == 86
-    assert set(s["stage_seconds"]) == {"read", "bake", "weld", "orient", "bind", "parts", "quantize", "spheres", "write"}
+    assert set(s["stage_seconds"]) == {"read", "bake", "weld", "degenerate", "orient", "bind", "parts", "quantize",
+                                       "spheres", "write"}
+    assert s["degenerate_dropped"] == 0 and s["stages"]["write"]["counts"]["check_seconds"] > 0
     assert out.exists()
     r = colossus("validate", out)
     assert r.exit_code == 0, r.output
@@ -84,8 +86,9 @@ def test_text_summary_and_options(tmp_path):
     assert r.exit_code == 0, r.output
     lines = r.stdout.splitlines()
     assert lines[0] == f"colossus import limb.glb -> {out}"
-    stages = [ln.split()[0] for ln in lines[3:13]]
-    assert stages == ["read", "bake", "weld", "orient", "bind", "parts", "quantize", "spheres", "write", "total"]
+    stages = [ln.split()[0] for ln in lines[3:14]]
+    assert stages == ["read", "bake", "weld", "degenerate", "orient", "bind", "parts", "quantize", "spheres", "write",
+                      "total"]
     assert "Y-up 1 m/unit -> Z-up 0.01 m/unit (x100)" in r.stdout
     assert "parts (any)" in r.stdout
     stage = Usd.Stage.Open(str(out))
@@ -119,5 +122,5 @@ def test_progress_bar_on_request(tmp_path):
     out = tmp_path / "limb.usda"
     r = colossus("import", SAMPLES / "limb.glb", "-o", out, "--progress")
     assert r.exit_code == 0, r.output
-    assert "importing" in r.stderr and "9/9" in r.stderr
+    assert "importing" in r.stderr and "10/10" in r.stderr
     assert "importing" not in r.stdout

@@ -267,3 +267,128 @@ def test_several_meshes_merged_or_chosen(tmp_path):
     assert one.vertex_count == 386
     # the chosen copy sits 2 m to the side of the original (Blender X stays X in Y-up output)
     assert abs((one.positions[:, 0].mean() - both.positions[:386, 0].mean()) - 2.0) < 1e-4
+
+
+# ------------------------------------------------------------------ dual-quaternion skinning
+def _dq_source(path, seed=5):
+    """A random-ish dual-quaternion UsdSkel rig built with usd-core: the fixture's tube on a
+    3-joint chain with 4 influences, a rigid geomBindTransform, one clip of 10 frames of large
+    random rotations (twists where linear blending would collapse the tube) and translations."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+    from scipy.spatial.transform import Rotation
+
+    from references.usd_fixture import JOINTS, _m4, smooth_weights, tube
+
+    rng = np.random.default_rng(seed)
+    stage = Usd.Stage.CreateNew(str(path))
+    stage.SetTimeCodesPerSecond(24.0)
+    stage.SetStartTimeCode(0.0)
+    stage.SetEndTimeCode(9.0)
+    UsdGeom.SetStageUpAxis(stage, "Y")
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    root = UsdSkel.Root.Define(stage, "/Rig")
+    stage.SetDefaultPrim(root.GetPrim())
+    skel = UsdSkel.Skeleton.Define(stage, "/Rig/Skel")
+    skel.CreateJointsAttr(JOINTS)
+    bind = np.repeat(np.eye(4)[None], 3, 0)
+    bind[:, 1, 3] = np.arange(3)
+    rest = np.repeat(np.eye(4)[None], 3, 0)
+    rest[1:, 1, 3] = 1.0
+    skel.CreateBindTransformsAttr(Vt.Matrix4dArray([_m4(m) for m in bind]))
+    skel.CreateRestTransformsAttr(Vt.Matrix4dArray([_m4(m) for m in rest]))
+    pts, tris = tube(12, 12)
+    G = np.eye(4)
+    G[:3, :3] = Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix()
+    G[:3, 3] = [0.2, -0.1, 0.05]
+    mesh_pts = ((np.c_[pts.astype(np.float64), np.ones(len(pts))] @ np.linalg.inv(G).T)[:, :3]).astype(np.float32)
+    ji, jw = smooth_weights(pts[:, 1].astype(np.float64), 4)
+    mesh = UsdGeom.Mesh.Define(stage, "/Rig/Body")
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(mesh_pts))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray([3] * len(tris)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(tris.ravel().astype(np.int32)))
+    mb = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    mb.CreateSkeletonRel().SetTargets([skel.GetPath()])
+    mb.CreateJointIndicesPrimvar(False, 4).Set(Vt.IntArray.FromNumpy(ji.ravel()))
+    mb.CreateJointWeightsPrimvar(False, 4).Set(Vt.FloatArray.FromNumpy(jw.ravel()))
+    mb.CreateGeomBindTransformAttr(_m4(G))
+    mb.CreateSkinningMethodAttr().Set(UsdSkel.Tokens.dualQuaternion)
+    anim = UsdSkel.Animation.Define(stage, "/Rig/Dance")
+    anim.CreateJointsAttr(JOINTS)
+    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+    ta, ra, sa = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr(), anim.CreateScalesAttr()
+    cur = Rotation.identity(3)
+    for f in range(10):
+        t = np.array([[0.0, 0, 0], [0, 1, 0], [0, 1, 0]]) + 0.05 * rng.normal(size=(3, 3))
+        ta.Set(Vt.Vec3fArray.FromNumpy(t.astype(np.float32)), float(f))
+        q = cur.as_quat().astype(np.float32)  # (x, y, z, w)
+        ra.Set(Vt.QuatfArray.FromNumpy(np.ascontiguousarray(q)), float(f))
+        sa.Set(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * 3), float(f))
+        cur = Rotation.from_rotvec(rng.normal(size=(3, 3)) * 0.25 + [[0, 0.3, 0]] * 3) * cur
+    stage.GetRootLayer().Save()
+    return path
+
+
+def _usd_skinned(path, times):
+    """usd-core's own skinning (the mesh's skinningMethod, SkinningQuery.ComputeSkinnedPoints) of
+    the stage's one skinned mesh at ``times``, in world space: (T, n, 3) float64, and the points."""
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    stage = Usd.Stage.Open(str(path))
+    cache = UsdSkel.Cache()
+    root = next(UsdSkel.Root(p) for p in stage.Traverse() if p.IsA(UsdSkel.Root))
+    cache.Populate(root, Usd.PrimDefaultPredicate)
+    (binding,) = cache.ComputeSkelBindings(root, Usd.PrimDefaultPredicate)
+    sq = cache.GetSkelQuery(binding.GetSkeleton())
+    (q,) = [t for t in binding.GetSkinningTargets() if t.GetPrim().IsA(UsdGeom.Mesh)]
+    pts = UsdGeom.Mesh(q.GetPrim()).GetPointsAttr().Get()
+    out = []
+    for t in times:
+        tc = Usd.TimeCode(float(t))
+        xf = sq.ComputeSkinningTransforms(tc)
+        p = type(pts)(pts)
+        assert q.ComputeSkinnedPoints(xf, p, tc)
+        w = np.array(UsdGeom.XformCache(tc).GetLocalToWorldTransform(binding.GetSkeleton().GetPrim()))
+        p = np.asarray(p, dtype=np.float64)
+        out.append(p @ w[:3, :3] + w[3, :3])
+    return np.array(out), str(q.GetSkinningMethod())
+
+
+def test_dual_quaternion_usd_rig_imports_skins_and_validates_as_usd_core_skins_it(tmp_path):
+    """Done-when of issue 21 (dual quaternion): the written asset skinned by usd-core equals the
+    source skinned by usd-core within 1e-6 x size at every key and half-way between; the runtime
+    equals usd-core; ``colossus validate`` passes it; inspect and the import summary show it."""
+    from click.testing import CliRunner
+    from colossus import load_collider
+    from colossus.cli import main
+
+    src = _dq_source(tmp_path / "dq.usda")
+    out = tmp_path / "dq_collider.usda"
+    r = CliRunner().invoke(main, ["import", str(src), "-o", str(out), "--json"], prog_name="colossus")
+    assert r.exit_code == 0, r.output
+    import json
+    s = json.loads(r.stdout)
+    assert s["not_carried"] == []  # the method is carried
+    assert s["stages"]["write"]["counts"]["skinning_method"] == "dualQuaternion"
+    times = np.arange(0, 9.5, 0.5)  # every key and half-way between
+    want, m_src = _usd_skinned(src, times)
+    got, m_out = _usd_skinned(out, times)
+    assert (m_src, m_out) == ("dualQuaternion", "dualQuaternion")
+    size = float(np.linalg.norm(want.reshape(-1, 3).max(0) - want.reshape(-1, 3).min(0)))
+    idx = cKDTree(want[0]).query(got[0])[1]  # asset vertex -> source vertex (welded / reordered)
+    err_asset = float(np.abs(got - want[:, idx]).max())
+    assert err_asset <= 1e-6 * size, err_asset / size
+    col = load_collider(str(out))
+    rt = np.array([col.pose(col.clips[0], t).points for t in times], dtype=np.float64)
+    err_rt = float(np.abs(rt - got).max())
+    assert err_rt <= 1e-6 * size, err_rt / size
+    # linear skinning of the same rig is far off: the check has teeth
+    from pxr import Usd, UsdSkel
+    lin = tmp_path / "lin.usda"
+    st = Usd.Stage.Open(str(out))
+    UsdSkel.BindingAPI(st.GetPrimAtPath(col.data.mesh_path)).GetSkinningMethodAttr().Set(UsdSkel.Tokens.classicLinear)
+    st.Export(str(lin))
+    assert np.abs(_usd_skinned(lin, times)[0] - got).max() > 1e-2 * size
+    v = CliRunner().invoke(main, ["validate", str(out), "--source", str(src), "--format", "json"], prog_name="colossus")
+    assert v.exit_code == 0, v.output
+    i = CliRunner().invoke(main, ["inspect", str(out)], prog_name="colossus")
+    assert i.exit_code == 0 and "skinning  dualQuaternion" in i.output

@@ -30,6 +30,14 @@ def _items(path, **kw):
 
 
 @pytest.fixture
+def ufbx_road():
+    """The tests of what the ufbx road carries: skipped where .fbx goes through assimp."""
+    from paths import fbx_road
+    if fbx_road() != "ufbx":
+        pytest.skip("FBX goes through assimp here (no ufbx, or COLOSSUS_FBX_READER=assimp)")
+
+
+@pytest.fixture
 def assimp_road(monkeypatch):
     """FBX read through assimp (the road without ufbx), whose checks name what it cannot carry."""
     monkeypatch.setenv("COLOSSUS_FBX_READER", "assimp")
@@ -108,7 +116,42 @@ def _skin(top):
     return W.find(top, "Deformer", "Skin")[0]
 
 
-def test_fbx_dual_quaternion_skin_warns_once_with_a_bound_and_strict_refuses(tmp_path):
+def test_fbx_dual_quaternion_skin_through_ufbx_is_carried_as_ufbx_skins_it(tmp_path, ufbx_road):
+    """SkinningType DualQuaternion: the asset says dualQuaternion, nothing is named, and usd-core's
+    skinning of the asset equals ufbx's own dual-quaternion skinning of the file (an independent
+    reference) within 1e-5 x size at every frame of the clip."""
+    from pxr import UsdSkel
+
+    from references.compare import AssetRig, axis_scale
+    from references.ufbx_eval import skinned_points
+    p = paths_dq(tmp_path)
+    assert _items(p) == []
+    out = tmp_path / "dq.usda"
+    assert _cli("import", p, "-o", out).exit_code == 0
+    rig = AssetRig(out)
+    from pxr import Usd
+    st = Usd.Stage.Open(str(out))
+    mesh = next(x for x in st.Traverse() if x.GetTypeName() == "Mesh")
+    assert UsdSkel.BindingAPI(mesh).GetSkinningMethodAttr().Get() == "dualQuaternion"
+    from colossus.pipeline.readers import read
+    src = read(p)
+    c = axis_scale(src.up_axis, src.meters_per_unit, rig.up_axis, rig.meters_per_unit)
+    codes = src.clips[0].times
+    theirs = skinned_points(p, codes / src.time_codes_per_second)
+    ours = rig.points(rig.clips[0], codes)
+    size = np.linalg.norm(np.ptp(ours.reshape(-1, 3), axis=0))
+    from scipy.spatial import cKDTree
+    worst = 0.0
+    for a, b in zip(ours, theirs):
+        b = b @ c[:3, :3].T + c[:3, 3]
+        worst = max(worst, cKDTree(b).query(a)[0].max(), cKDTree(a).query(b)[0].max())
+    assert worst <= 1e-5 * size, worst / size
+    # linear skinning would be off by far more: the comparison sees the method
+    from colossus.pipeline.readers.bounds import dq_lbs_gap
+    assert float(dq_lbs_gap(src).max()) > 100 * worst
+
+
+def test_fbx_dual_quaternion_skin_warns_once_with_a_bound_and_strict_refuses(tmp_path, assimp_road):
     paths = _limb(tmp_path, lambda top: W.set_child(_skin(top), "SkinningType", [("S", "DualQuaternion")]))
     for p in paths:
         items = _items(p)
@@ -117,7 +160,32 @@ def test_fbx_dual_quaternion_skin_warns_once_with_a_bound_and_strict_refuses(tmp
     _one_line_refusal(paths[0], tmp_path, "fbx_skinning_type")
 
 
-def test_fbx_blend_skin_fires_only_with_non_zero_blend_weights(tmp_path):
+def test_fbx_blend_skin_through_ufbx_takes_the_nearer_method_with_its_bound(tmp_path, ufbx_road):
+    """Maya's per-vertex Blend: all weights 0 is linear (nothing named); one vertex at 0.5 is
+    skinned linearly (the nearer) with the bound 0.5 x its own linear / dual-quaternion gap, at
+    most half the dual-quaternion file's largest gap."""
+    from colossus.pipeline.readers import read
+    from colossus.pipeline.readers.bounds import dq_lbs_gap, posed_size
+
+    def blend(weights):
+        def edit(top):
+            s = _skin(top)
+            W.set_child(s, "SkinningType", [("S", "Blend")])
+            W.set_child(s, "Indexes", [("i", np.arange(4, dtype=np.int32))])
+            W.set_child(s, "BlendWeights", [("d", np.array(weights, dtype=np.float64))])
+        return edit
+    zero = _limb(tmp_path, blend([0, 0, 0, 0]), "zero", ascii_too=False)[0]
+    half = _limb(tmp_path, blend([0, 0.5, 0, 0]), "half", ascii_too=False)[0]
+    assert _items(zero) == [] and read(zero).skinning_method == "classicLinear"
+    items = _items(half)
+    assert [x["what"] for x in items] == ["fbx_skinning_type"] and "classicLinear" in items[0]["detail"]
+    m = read(half)
+    assert m.skinning_method == "classicLinear"
+    full = float(dq_lbs_gap(m).max()) / posed_size(m)
+    assert 0 < items[0]["bound_relative"] <= 0.5 * full * (1 + 1e-6)
+
+
+def test_fbx_blend_skin_fires_only_with_non_zero_blend_weights(tmp_path, assimp_road):
     def blend(weights):
         def edit(top):
             s = _skin(top)
@@ -148,7 +216,7 @@ def _rrss_edit(scale, inherit):
     return f
 
 
-def test_fbx_inherit_type_rrss_through_ufbx_is_carried_and_checked(tmp_path, monkeypatch):
+def test_fbx_inherit_type_rrss_through_ufbx_is_carried_and_checked(tmp_path, ufbx_road, monkeypatch):
     """ufbx evaluates RrSs under a non-uniformly scaled parent (its helper nodes hold the parent
     scale each bone must not inherit): the keys reproduce ufbx's native evaluation (the file loaded
     again without helpers, clusters on the real bones) at rest and at the checked frames, so
@@ -203,7 +271,7 @@ def test_fbx_transform_skin_is_bounded_by_the_node_offset(tmp_path, road, monkey
     _one_line_refusal(paths[0], tmp_path, "fbx_transform_skin")
 
 
-def test_fbx_geometric_transform_on_a_skinned_mesh_through_ufbx_is_carried(tmp_path):
+def test_fbx_geometric_transform_on_a_skinned_mesh_through_ufbx_is_carried(tmp_path, ufbx_road):
     """ufbx binds the geometry in its geometric transform's space: nothing is left out, and the
     bind positions are the unedited ones moved by the geometric offset (one rigid shift)."""
     from colossus.pipeline.readers import read
@@ -272,7 +340,7 @@ def test_fbx_cubic_curve_between_sparse_keys(tmp_path, assimp_road):
     assert _items(_limb(tmp_path, edit(0x104), "linear", ascii_too=False)[0]) == []
 
 
-def test_fbx_cubic_curve_through_ufbx_is_evaluated_at_every_frame(tmp_path):
+def test_fbx_cubic_curve_through_ufbx_is_evaluated_at_every_frame(tmp_path, ufbx_road):
     """ufbx evaluates the cubic segment at every grid frame: the frames are the curve's, nothing to name."""
     from colossus.pipeline.readers import read
 
@@ -406,14 +474,33 @@ def test_gltf_live_morph_targets_are_bounded_inert_ones_are_not_items(tmp_path):
 
 
 # ------------------------------------------------------------------------------ USD
-def test_usd_dual_quaternion_skinning_is_bounded_by_usd_cores_own(tmp_path):
-    from pxr import Usd, UsdGeom, UsdSkel
+def _limb_dq(tmp_path, which=None):
+    """``samples/limb.usda`` with ``primvars:skel:skinningMethod = "dualQuaternion"`` on its meshes
+    (``which``: only on the meshes whose names it holds; the others stay linear)."""
+    from pxr import Sdf, Usd, UsdGeom, UsdSkel
     st = Usd.Stage.Open(str(SAMPLES / "limb.usda"))
+    if which is not None:  # a second, linear copy of the limb beside it: the meshes mix methods
+        layer = st.GetRootLayer()
+        assert Sdf.CopySpec(layer, "/root/LimbArmature/Limb", layer, "/root/LimbArmature/Limb2")
     for prim in st.Traverse():
-        if prim.IsA(UsdGeom.Mesh):
+        if prim.IsA(UsdGeom.Mesh) and (which is None or prim.GetParent().GetName() in which):
             UsdSkel.BindingAPI(prim).CreateSkinningMethodAttr().Set(UsdSkel.Tokens.dualQuaternion)
     p = tmp_path / "limb_dq.usda"
     st.Export(str(p))
+    return p
+
+
+def test_usd_dual_quaternion_skinning_is_carried(tmp_path):
+    from colossus.pipeline.readers import read
+    p = _limb_dq(tmp_path)
+    assert _items(p) == []
+    assert read(p).skinning_method == "dualQuaternion"
+
+
+def test_usd_mixed_skinning_methods_are_bounded_by_usd_cores_own(tmp_path):
+    """Meshes that mix methods: the collider carries one; the others are bounded by usd-core's
+    own dual-quaternion skinning against its linear skinning, and --strict refuses."""
+    p = _limb_dq(tmp_path, which={"Limb"})
     items = _items(p)
     assert [x["what"] for x in items] == ["usd_skinning_method"] and items[0]["bound_relative"] > 1e-4
     _one_line_refusal(p, tmp_path, "usd_skinning_method")
@@ -421,16 +508,10 @@ def test_usd_dual_quaternion_skinning_is_bounded_by_usd_cores_own(tmp_path):
 
 def test_numpy_dual_quaternions_agree_with_usd_core(tmp_path):
     """The FBX bound's dual-quaternion skinning (reader.bounds) is usd-core's: on the USD sample
-    made dual-quaternion, its largest gap to linear skinning at the frames equals usd-core's."""
-    from pxr import Usd, UsdGeom, UsdSkel
+    with mixed methods, its largest gap to linear skinning at the frames equals usd-core's."""
     from colossus.pipeline.readers import read
     from colossus.pipeline.readers import bounds
-    st = Usd.Stage.Open(str(SAMPLES / "limb.usda"))
-    for prim in st.Traverse():
-        if prim.IsA(UsdGeom.Mesh):
-            UsdSkel.BindingAPI(prim).CreateSkinningMethodAttr().Set(UsdSkel.Tokens.dualQuaternion)
-    p = tmp_path / "limb_dq.usda"
-    st.Export(str(p))
+    p = _limb_dq(tmp_path, which={"Limb"})
     usd = _items(p)[0]["bound_relative"]
     m = read(p)
     ours = float(bounds.dq_lbs_gap(m).max()) / bounds.posed_size(m)

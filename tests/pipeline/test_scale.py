@@ -282,10 +282,10 @@ def test_import_many_ctrl_c_marks_incomplete(tmp_path, monkeypatch):
     import colossus.pipeline.batch as batch
     real = batch._import_unit
 
-    def interrupted_on_second(src, out, settings):
+    def interrupted_on_second(src, out, settings, *rest):
         if "limb.fbx" in src:
             raise KeyboardInterrupt
-        return real(src, out, settings)
+        return real(src, out, settings, *rest)
     monkeypatch.setattr(batch, "_import_unit", interrupted_on_second)
     r = import_cli(SAMPLES / "limb.glb", SAMPLES / "limb.fbx", "-o", tmp_path, "--json")
     assert r.exit_code == 130

@@ -191,6 +191,73 @@ def naive_lbs(points, joint_indices, joint_weights, mats):
     return out
 
 
+def naive_dqs(points, joint_indices, joint_weights, mats, geom_bind=None):
+    """Dual-quaternion skinning by UsdSkel's definition (``_SkinPointsDQS`` in
+    ``pxr/usd/usdSkel/utils.cpp``), one vertex at a time; (F, n, 3) float64.
+
+    Per joint: ``A = mats[:3, :3]`` split by its polar decomposition ``A = R S`` (``R`` proper:
+    negated where ``det A < 0``; ``|det A| < 1e-10`` is singular: zero dual quaternion, ``S = I``),
+    the dual quaternion ``(q, (0, t/2) q)``.  Per vertex: ``p = G p``; the pivot is the first
+    influence of largest weight; joints whose ``q`` has a negative dot with the pivot's enter
+    with a negated weight; the blend ``(b, c)`` is normalised (identity when ``|b| < 1e-10``);
+    the point is ``sum w S p`` when any joint of the pose has ``S`` not within 1e-6 of the
+    identity (float32, elementwise), else ``p``; result ``R(b) p' + 2 Im(c b*) / |b|^2``."""
+    from scipy.spatial.transform import Rotation
+
+    mats = np.asarray(mats, dtype=np.float64)
+    G = np.eye(4) if geom_bind is None else np.asarray(geom_bind, dtype=np.float64)
+    P = np.c_[np.asarray(points, dtype=np.float64), np.ones(len(points))] @ G.T
+    out = np.zeros((len(mats), len(points), 3))
+
+    def qmul(a, b):
+        w1, v1 = a[0], a[1:]
+        w2, v2 = b[0], b[1:]
+        return np.r_[w1 * w2 - v1 @ v2, w1 * v2 + w2 * v1 + np.cross(v1, v2)]
+
+    for f in range(len(mats)):
+        dqs, scales = [], []
+        for M in mats[f]:
+            A, t = M[:3, :3], M[:3, 3]
+            if abs(np.linalg.det(A)) < 1e-10:
+                dqs.append((np.zeros(4), np.zeros(4)))
+                scales.append(np.eye(3))
+                continue
+            U, _, Vt = np.linalg.svd(A)
+            R = U @ Vt
+            if np.linalg.det(A) < 0:
+                R = -R
+            x, y, z, w = Rotation.from_matrix(R).as_quat()
+            q = np.array([w, x, y, z])
+            dqs.append((q, 0.5 * qmul(np.r_[0.0, t], q)))
+            scales.append(R.T @ A)
+        has_scale = any(np.any(np.abs(s.astype(np.float32) - np.eye(3)) >= 1e-6) for s in scales)
+        for v in range(len(points)):
+            w = np.asarray(joint_weights[v], dtype=np.float64)
+            j = np.asarray(joint_indices[v])
+            piv = int(np.argmax(w))  # the first of the largest
+            qp = dqs[j[piv]][0]
+            b, c, s = np.zeros(4), np.zeros(4), np.zeros(3)
+            for k in range(len(w)):
+                if w[k] == 0:
+                    continue
+                q, d = dqs[j[k]]
+                s += w[k] * scales[j[k]] @ P[v, :3]
+                sign = -1.0 if q @ qp < 0 else 1.0
+                b += sign * w[k] * q
+                c += sign * w[k] * d
+            if not has_scale:
+                s = P[v, :3]
+            n = np.linalg.norm(b)
+            if n < 1e-10:
+                out[f, v] = s
+                continue
+            b, c = b / n, c / n
+            bc = b * np.r_[1.0, -1, -1, -1]
+            rot = qmul(qmul(b, np.r_[0.0, s]), bc)[1:]
+            out[f, v] = rot + 2 * qmul(c, bc)[1:]
+    return out
+
+
 def trs(t, q, s):
     """(..., 4, 4) column-vector T R S from translations, (x, y, z, w) quaternions, scales
     (the unit-quaternion rotation matrix written out)."""

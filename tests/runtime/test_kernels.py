@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from references import naive
 from colossus.runtime import certify as C
+from colossus.runtime import certify_dq as CDQ
 from colossus.runtime.schema import Clip
 from colossus.runtime.kernels import bounds as B
 from colossus.runtime.kernels import interval as IV
@@ -61,6 +62,96 @@ def test_part_farthest_matches_naive_lbs_and_todo():
                 dist = np.linalg.norm(sk[f, verts] - centers[f, p], axis=1)
                 assert d[f, p] == pytest.approx(dist.max(), abs=1e-9)
                 assert v[f, p] in verts[dist == dist.max()]
+
+
+def _dq_rig(rng, n=300, J=7, k=4, F=6, kind="rigid"):
+    """Random DQS inputs: per-frame skinning transforms with large rotations (hemisphere flips),
+    and (``kind``) uniform / non-uniform scales, shear, a mirrored joint or a singular one."""
+    pts = (2 * rng.normal(size=(n, 3))).astype(np.float32)
+    ji = rng.integers(0, J, size=(n, k)).astype(np.int32)
+    jw = (rng.random((n, k)) * (rng.random((n, k)) < 0.8)).astype(np.float32)
+    jw[:, 0] += 1e-3
+    jw = (jw / jw.sum(1, keepdims=True)).astype(np.float32)
+    ji[jw == 0] = 99  # padding may name any joint
+    m = np.repeat(np.eye(4)[None, None], F, 0).repeat(J, 1)
+    m[..., :3, :3] = Rotation.random(F * J, random_state=int(rng.integers(1 << 30))).as_matrix().reshape(F, J, 3, 3)
+    if kind in ("uniform", "nonuniform", "shear", "mirror", "singular"):
+        s = rng.uniform(0.6, 1.5, size=(F, J, 1 if kind == "uniform" else 3))
+        m[..., :3, :3] = m[..., :3, :3] * s[..., None, :]
+    if kind == "shear":
+        m[..., :3, :3] += 0.2 * rng.normal(size=(F, J, 3, 3))
+    if kind == "mirror":
+        m[:, 1, :3, :3] *= -1
+    if kind == "singular":
+        m[:, 2, :3, :3] *= 1e-4  # |det| < 1e-10: UsdSkel's Factor gives up on it
+    m[..., :3, 3] = 3 * rng.normal(size=(F, J, 3))
+    G = np.eye(4)
+    G[:3, :3] = Rotation.random(random_state=int(rng.integers(1 << 30))).as_matrix() * 1.3
+    G[:3, 3] = rng.normal(size=3)
+    return pts, ji, jw, m, G
+
+
+def _usd_dqs(pts, ji, jw, m, G):
+    """usd-core's own dual-quaternion skinning of every frame of ``m``: (F, n, 3) float64."""
+    out = []
+    g = Gf.Matrix4d(*np.asarray(G).T.reshape(-1).tolist())
+    idx = Vt.IntArray.FromNumpy(np.where(jw == 0, 0, ji).reshape(-1).astype(np.int32))
+    wts = Vt.FloatArray.FromNumpy(jw.reshape(-1))
+    for mf in m:
+        xf = Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.swapaxes(mf, -1, -2)))
+        p = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts))
+        assert UsdSkel.SkinPoints(UsdSkel.Tokens.dualQuaternion, g, xf, idx, wts, ji.shape[1], p)
+        out.append(np.asarray(p, dtype=np.float64))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("kind", ["rigid", "uniform", "nonuniform", "shear", "mirror", "singular"])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_dqs_matches_usdskel_on_every_frame(kind, seed):
+    """The one kernel's dual-quaternion switch is UsdSkel's DQS, scale and shear included."""
+    rng = np.random.default_rng(100 + seed)
+    pts, ji, jw, m, G = _dq_rig(rng, kind=kind)
+    ref = _usd_dqs(pts, ji, jw, m, G)
+    got = SK.skin_frames(pts, ji, jw, SK.fold_dq(m, G), dtype=np.float64)
+    size = np.linalg.norm(ref.reshape(-1, 3).max(0) - ref.reshape(-1, 3).min(0))
+    assert np.abs(got - ref).max() <= 1e-6 * size
+    assert np.abs(SK.skin_frames(pts, ji, jw, SK.fold_method("dualQuaternion", m, G)) - ref).max() <= 1e-6 * size
+
+
+@pytest.mark.parametrize("n", [50, 9000])  # serial and parallel kernels
+@pytest.mark.parametrize("kind", ["rigid", "nonuniform", "mirror"])
+def test_dqs_matches_naive_dqs(n, kind):
+    rng = np.random.default_rng(7)
+    pts, ji, jw, m, G = _dq_rig(rng, n=n, F=2, kind=kind)
+    W = np.eye(4)
+    W[:3, :3] = 2.0 * Rotation.random(random_state=3).as_matrix()
+    W[:3, 3] = [1, 2, 3]
+    got = SK.skin_frames(pts, ji, jw, SK.fold_dq(m, G, W), dtype=np.float64)
+    ref = naive.naive_dqs(pts, ji, jw, m, G) @ W[:3, :3].T + W[:3, 3] if n < 1000 else None
+    if ref is None:  # the parallel driver against the serial one
+        ref = SK.skin_frames(pts[:200], ji[:200], jw[:200], SK.fold_dq(m, G, W), dtype=np.float64)
+        got = got[:, :200]
+    np.testing.assert_allclose(got, ref, atol=1e-9 * np.abs(ref).max())
+
+
+def test_dqs_part_farthest_and_subset_use_the_switch():
+    rng = np.random.default_rng(8)
+    pts, ji, jw, m, G = _dq_rig(rng, F=3, kind="uniform")
+    mats = SK.fold_dq(m, G)
+    ref = naive.naive_dqs(pts, ji, jw, m, G)
+    poff = np.array([0, 40, 300])
+    pv = np.arange(300, dtype=np.int32)
+    c = rng.normal(size=(3, 2, 3))
+    d, v = SK.part_farthest(pts, ji, jw, mats, poff, pv, c)
+    for f in range(3):
+        for p in range(2):
+            vs = pv[poff[p]:poff[p + 1]]
+            dist = np.linalg.norm(ref[f, vs] - c[f, p], axis=1)
+            assert d[f, p] == pytest.approx(dist.max(), rel=1e-9) and v[f, p] == vs[np.argmax(dist)]
+    out = np.zeros((300, 3), np.float32)
+    pi, pj, pw = SK.check_skin_inputs(pts, ji, jw, m.shape[1])
+    SK._skin_subset(pv, 0, 300, pi, pj, pw, np.ascontiguousarray(mats[:1]), out)
+    np.testing.assert_allclose(out, ref[0], atol=1e-5 * np.abs(ref).max())
 
 
 def test_skin_inputs_one_padding_policy():
@@ -266,7 +357,8 @@ def _dense(rig, clip, t0, t1, steps=64):
 
 
 @pytest.mark.parametrize("seed,scale", [(0, False), (1, False), (2, True), (3, False), (4, True)])
-def test_continuous_certificate_is_sound_against_dense_brute_force(seed, scale):
+def test_continuous_certificate_is_sound_against_dense_brute_force(seed, scale, monkeypatch):
+    monkeypatch.setattr(C, "BATCHED_MIN_PAIRS", 0)  # the batched levels B and C, as on a large asset
     rng = np.random.default_rng(seed)
     rig, clip, skel = random_rig(rng, scale=scale, tight=seed % 2 == 0 and not scale)
     # relative tolerance 1e-6: above float32 quaternion noise (1e-7), below the validator's 1e-5
@@ -305,7 +397,8 @@ def _half_lerp(s0, s1, f):
     return (h(h((1 - f) * s0) + h(f * s1))).astype(np.float64)
 
 
-def test_a_vertex_leaving_only_between_samples_is_caught_with_its_interval():
+@pytest.mark.parametrize("min_pairs", [0, 10 ** 9])  # the batched levels B and C, and the reference loop
+def test_a_vertex_leaving_only_between_samples_is_caught_with_its_interval(min_pairs, monkeypatch):
     """Two joints; the child swings +0.9 rad then -0.9 rad: the straight pose half-way is outside a
     sphere fitted to the two frames around a centre below the child's pivot (the tip is 1.368 from
     it at both frames and 1.5 when straight)."""
@@ -328,6 +421,7 @@ def test_a_vertex_leaving_only_between_samples_is_caught_with_its_interval():
     c = np.array([0.0, 0.5, 0.0])
     r = np.linalg.norm(yk - c, axis=2).max() * (1 + 1e-6)
     rig = C.Rig(pts, ji, jw, np.eye(4), bind, rest, parents, [0], c[None], [r], [0, 11], np.arange(11))
+    monkeypatch.setattr(C, "BATCHED_MIN_PAIRS", min_pairs)
     s = C.sampled(rig, skel, 0.0, 1e-6)
     ok = ~(s.bound > s.spheres[..., 3] * (1 + 1e-6))
     assert ok.all()  # both samples inside
@@ -362,3 +456,347 @@ def test_pareto_set_keeps_every_maximiser():
         e = rng.random(4)
         val = e[0] * d + w @ e[1:]
         assert val[keep].max() == pytest.approx(val.max())
+
+
+# -- the continuous certificate's levels B and C, batched (runtime.kernels.subdivide) ----------
+def test_chord_nodes_equals_chord_tasks():
+    """The batched per-vertex chord bound (one kernel over all nodes, J-space transforms built in
+    the kernel from skeleton and skinning transforms) against the numpy reference
+    ``interval.chord_tasks`` on the same nodes, and against its definition by brute force."""
+    from colossus.runtime.kernels import subdivide as SD
+    rng = np.random.default_rng(31)
+    rig, clip, skel = random_rig(rng, scale=True)
+    I = len(clip.times) - 1
+    ibg = rig.inv_bind @ rig.geom_bind
+    ts = np.r_[clip.times, clip.times[:-1] + 0.37, clip.times[:-1] + 0.5]
+    sk, skin = SD.pose_at(clip, ts, rig.rest_local, rig.parents, rig.topo, ibg)
+    np.testing.assert_allclose(skin, sk @ ibg, rtol=0, atol=1e-12)
+    N = 40
+    part = rng.integers(0, rig.P, N)
+    ta, tb = rng.integers(0, len(ts), N), rng.integers(0, len(ts), N)
+    row = rng.integers(0, 7, N)
+    scale = rng.random(N)
+    drow = rng.random((7, len(rig.bind))) * 0.1
+    prow = rng.random((7, len(rig.bind))) * 0.01
+    bd = rig.bounds
+    got = SD.chord_nodes(rig.points, rig.joint_indices, rig.joint_weights, rig.vert_offsets, rig.verts,
+                         bd.part_joint, bd.pj_offsets, bd.pj_joint, bd.part_centers, sk, skin, part, ta, tb, row,
+                         scale, drow, prow)
+    # the reference: J-space folded transforms per (time, part joint), one task per node
+    mats = np.stack([rig.joint_space_mats(sk[[ta[n], tb[n]]], rig.part_joint[part[n]]) for n in range(N)])
+    mats = mats.reshape(2 * N, len(rig.bind), 12)
+    want = IV.chord_tasks(rig.points, rig.joint_indices, rig.joint_weights, mats, rig.vert_offsets, rig.verts,
+                          bd.part_centers, part, 2 * np.arange(N), 2 * np.arange(N) + 1, row, scale, drow, prow)
+    for g, w in zip(got, want):
+        np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-12)
+    # by definition: every vertex at both ends, its weighted deviation, the largest sum
+    for n in range(N):
+        vs = rig.verts[rig.vert_offsets[part[n]]:rig.vert_offsets[part[n] + 1]]
+        J = rig.part_joint[part[n]]
+        ends = [naive.naive_lbs(rig.points[vs], rig.joint_indices[vs], rig.joint_weights[vs],
+                                (np.linalg.inv(sk[t, J]) @ sk[t] @ ibg)[None])[0] for t in (ta[n], tb[n])]
+        d = [np.linalg.norm(e - rig.part_centers[part[n]], axis=1) for e in ends]
+        x = scale[n] * drow[row[n]] + prow[row[n]]
+        dev = (np.abs(rig.joint_weights[vs]) * x[rig.joint_indices[vs]]).sum(1)
+        u = (np.maximum(d[0], d[1]) + dev).max()
+        assert u <= got[0][n] <= u * (1 + 3e-12)  # the bound, padded by ROUND, and no more
+        assert got[2][n] == pytest.approx(d[0].max(), rel=1e-12) and got[4][n] == pytest.approx(d[1].max(), rel=1e-12)
+
+
+@pytest.mark.parametrize("seed,scale,growth", [(0, False, False), (1, False, True), (2, True, False),
+                                               (4, True, True), (5, False, False)])
+def test_batched_refine_decides_as_the_reference(seed, scale, growth, monkeypatch):
+    """Levels B and C batched (``certify.BATCHED``) against the reference loop: the same status
+    of every (interval, part), the same subdivisions and failures, the same bounds to rounding."""
+    rng = np.random.default_rng(seed)
+    rig, clip, skel = random_rig(rng, scale=scale, tight=True)
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    ok = ~(s.bound > s.spheres[..., 3] * (1 + 1e-6))
+    kw = dict(growth=True, max_depth=5, rho=rig.part_radii * 0.98) if growth else {}
+    res = {}
+    for batched in (False, True):
+        monkeypatch.setattr(C, "BATCHED", batched)
+        monkeypatch.setattr(C, "BATCHED_MIN_PAIRS", 0)
+        res[batched] = C.continuous(rig, clip, clip.times, s.bound, ok, 0.0, 1e-6, **kw)
+    a, b = res[False], res[True]
+    assert a.subdivided > 0
+    np.testing.assert_array_equal(a.status, b.status)
+    assert a.subdivided == b.subdivided
+    np.testing.assert_allclose(b.bound, a.bound, rtol=1e-12)
+    assert [(f["interval"], f["part"], f["definite"], f["vertex"]) for f in a.failures] == \
+        [(f["interval"], f["part"], f["definite"], f["vertex"]) for f in b.failures]
+    for f, g in zip(a.failures, b.failures):
+        assert f["excess"] == pytest.approx(g["excess"], rel=1e-9, abs=1e-12)
+
+
+# -- the sampled proof's exact tier by chunks (runtime.kernels.farthest) -------------------------
+def _chunk_bounds_naive(rig, m, centers, ch):
+    """``min(K_c, D_c)`` of :mod:`runtime.kernels.farthest` written out (numpy, unpadded)."""
+    def n2(L):  # the Gershgorin bound of runtime.kernels.bounds._norm2
+        return np.sqrt(np.abs(L.T @ L).sum(1).max())
+    F = len(m)
+    M = np.zeros((F, m.shape[1], 4, 4))
+    M[..., :3, :] = m.reshape(F, -1, 3, 4)
+    M[..., 3, 3] = 1
+    out = np.zeros((F, len(ch.radius)))
+    for p in range(rig.P):
+        J = rig.part_joint[p]
+        for c in range(ch.part_chunks[p], ch.part_chunks[p + 1]):
+            o, r = np.r_[ch.center[c], 1.0], ch.radius[c]
+            js = ch.joints[ch.joint_offsets[c]:ch.joint_offsets[c + 1]]
+            wm = ch.jwmax[ch.joint_offsets[c]:ch.joint_offsets[c + 1]]
+            for f in range(F):
+                C = centers[f, p]
+                yJ = (M[f, J] @ o)[:3]
+                nJ = n2(M[f, J, :3, :3])
+                K = ch.wabs[c] * max(np.linalg.norm((M[f, b] @ o)[:3] - C) + n2(M[f, b, :3, :3]) * r for b in js) \
+                    + ch.wdev[c] * np.linalg.norm(C)
+                D = np.linalg.norm(yJ - C) + nJ * r + ch.wdev[c] * (np.linalg.norm(yJ) + nJ * r) + sum(
+                    w * (np.linalg.norm((M[f, b] @ o)[:3] - yJ) + n2(M[f, b, :3, :3] - M[f, J, :3, :3]) * r)
+                    for b, w in zip(js, wm) if b != J)
+                out[f, c] = min(K, D)
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_chunk_bounds_hold_against_brute_force_and_are_the_written_bound(seed):
+    """The chunk bound ``min(K_c, D_c)`` is an upper bound of every chunk vertex's skinned distance
+    (dense brute force, random rigs, wild poses with non-uniform scales), and it is the bound the
+    docstring writes, to rounding (a bound loosened by 1 % fails here)."""
+    from colossus.runtime.kernels import farthest as FA
+    rng = np.random.default_rng(40 + seed)
+    rig, clip, skel = random_rig(rng, scale=seed == 2)
+    wild = naive.compose(naive.trs(rng.normal(size=(6, 6, 3)), Rotation.random(36, random_state=seed)
+                                   .as_quat().reshape(6, 6, 4), rng.uniform(0.5, 2, (6, 6, 3))), rig.parents)
+    ch = FA.chunk_data(rig.points, rig.joint_indices, rig.joint_weights, rig.vert_offsets, rig.verts, size=8)
+    for poses in (skel, wild):
+        m = rig.skin_mats(poses)
+        centers = rng.normal(size=(len(poses), rig.P, 3))
+        got = FA.chunk_bounds(m, centers, rig.part_joint, ch)
+        want = _chunk_bounds_naive(rig, m, centers, ch)
+        np.testing.assert_allclose(got, want, rtol=1e-9)
+        assert (got >= want).all()
+        y = naive.naive_lbs(rig.points, rig.joint_indices, rig.joint_weights, poses @ rig.inv_bind)
+        part = np.repeat(np.arange(rig.P), np.diff(ch.part_chunks))
+        for c in range(len(ch.radius)):
+            vs = rig.verts[ch.pos[ch.pos_offsets[c]:ch.pos_offsets[c + 1]]]
+            far = np.linalg.norm(y[:, vs] - centers[:, part[c], None], axis=2).max(1)
+            assert (far <= got[:, c]).all()
+            assert (far <= want[:, c] * (1 + 1e-9)).all()
+        # the bound is not vacuous: pruning has something to work with
+        assert (want < 1.5 * np.linalg.norm(y[:, rig.verts] - centers[:, np.repeat(np.arange(rig.P), np.diff(rig.vert_offsets))], axis=2).max()).mean() > 0.5
+
+
+@pytest.mark.parametrize("n", [400, 30000])  # the one-thread and the threaded kernel
+def test_chunk_search_equals_part_farthest(n):
+    """The exact tier by chunks returns exactly ``part_farthest``'s distances and vertices (ties
+    broken alike), for tight and random centres, an empty part, duplicated vertices (ties) and a
+    NaN point."""
+    from colossus.runtime.kernels import farthest as FA
+    rng = np.random.default_rng(5)
+    rig, clip, skel = random_rig(rng, n=n)
+    pts = rig.points.copy()
+    pts[rig.verts[rig.vert_offsets[1] + 3]] = pts[rig.verts[rig.vert_offsets[1] + 5]]  # a tie
+    voff = rig.vert_offsets.copy()
+    voff[2] = voff[3]  # part 2 empty, part 3 gets its vertices
+    m = rig.skin_mats(skel)
+    sph, _, _ = B.pose_bounds(skel, rig.bounds)
+    for centers in (sph[..., :3], sph[..., :3] + rng.normal(size=sph[..., :3].shape)):
+        todo = rng.random((len(skel), rig.P)) < 0.7
+        ch = FA.chunk_data(pts, rig.joint_indices, rig.joint_weights, voff, rig.verts)
+        d, v, skinned = FA.farthest(pts, rig.joint_indices, rig.joint_weights, m, voff, rig.verts, rig.part_joint,
+                                    centers, todo, ch)
+        d0, v0 = SK.part_farthest(pts, rig.joint_indices, rig.joint_weights, m, voff, rig.verts, centers, todo=todo)
+        np.testing.assert_array_equal(v, v0)
+        np.testing.assert_allclose(d, d0, rtol=1e-13)
+        assert np.isnan(d[~todo]).all() and skinned <= (np.diff(voff)[None] * todo).sum()
+    pts[rig.verts[0]] = np.nan  # its chunk's ball is NaN: never pruned
+    with np.errstate(invalid="ignore"):
+        ch = FA.chunk_data(pts, rig.joint_indices, rig.joint_weights, voff, rig.verts)
+    d, v, _ = FA.farthest(pts, rig.joint_indices, rig.joint_weights, m, voff, rig.verts, rig.part_joint,
+                          sph[..., :3], np.ones((len(skel), rig.P), bool), ch)
+    assert np.isinf(d[:, 0]).all() and (v[:, 0] == rig.verts[0]).all()
+
+
+def test_sampled_proof_is_the_same_with_the_chunk_search(monkeypatch):
+    """``certify.sampled`` with the exact tier by chunks (``certify.CHUNKED``) and by whole parts:
+    the same tiers, bounds, distances and vertices."""
+    rng = np.random.default_rng(12)
+    rig, clip, skel = random_rig(rng, n=2000)
+    out = {}
+    exact = rng.random((len(skel), rig.P)) < 0.5
+    for chunked in (False, True):
+        monkeypatch.setattr(C, "CHUNKED", chunked)
+        out[chunked] = C.sampled(rig, skel, 0.0, 1e-6, exact=exact)
+    a, b = out[False], out[True]
+    np.testing.assert_array_equal(a.tier, b.tier)
+    np.testing.assert_array_equal(a.vertex, b.vertex)
+    np.testing.assert_allclose(b.dist, a.dist, rtol=1e-13)
+    np.testing.assert_allclose(b.bound, a.bound, rtol=1e-13)
+
+
+# -- dual-quaternion certificate (runtime.certify_dq) -------------------------------------------
+def random_dq_rig(rng, J=6, n=300, F=6, angle=0.6, slack=0.15, world=None):
+    """A random rig skinned by UsdSkel's DQS (naive_dqs), its spheres fitted to the frames (plus
+    ``slack`` of the radius: the in-between poses may leave them)."""
+    parents = np.array([-1] + [int(rng.integers(0, j)) for j in range(1, J)])
+    rest_t = rng.normal(size=(J, 3))
+    rest_t[0] = 0
+    rest = naive.trs(rest_t, np.tile([0, 0, 0, 1.0], (J, 1)), np.ones((J, 3)))
+    bind = naive.compose(rest, parents)
+    pts = (bind[rng.integers(0, J, n), :3, 3] + 0.4 * rng.normal(size=(n, 3))).astype(np.float32)
+    d = np.linalg.norm(pts[:, None] - bind[None, :, :3, 3], axis=2)
+    ji = np.argsort(d, 1)[:, :4].astype(np.int32)
+    w = np.exp(-np.take_along_axis(d, ji, 1) ** 2) * (rng.random((n, 4)) < 0.8)
+    w[:, 0] += 1e-3
+    jw = (w / w.sum(1, keepdims=True)).astype(np.float32)
+    owner = ji[:, 0]
+    order = np.argsort(owner, kind="stable")
+    voff = np.searchsorted(owner[order], np.arange(J + 1))
+    times = np.arange(F, dtype=float)
+    q = np.empty((F, J, 4))
+    cur = Rotation.random(J, random_state=int(rng.integers(1 << 30)))
+    for f in range(F):
+        q[f] = cur.as_quat()
+        cur = Rotation.from_rotvec(rng.normal(size=(J, 3)) * angle / 2) * cur
+    t = rest_t[None] + 0.2 * rng.normal(size=(F, J, 3))
+    s = np.ones((F, J, 3))
+    clip = Clip("c", "/c", times, t, times, q.astype(np.float32).astype(float), times, s, np.arange(J), times)
+    skel = naive.compose(naive.trs(t, clip.vr, s), parents)
+    y = naive.naive_dqs(pts, ji, jw, skel @ np.linalg.inv(bind))
+    centers, radii = np.zeros((J, 3)), np.zeros(J)
+    for p in range(J):
+        vs = order[voff[p]:voff[p + 1]]
+        loc = np.einsum("fij,fvj->fvi", np.linalg.inv(skel[:, p]), np.concatenate([y[:, vs], np.ones((F, len(vs), 1))], 2))[..., :3]
+        lo, hi = loc.reshape(-1, 3).min(0), loc.reshape(-1, 3).max(0)
+        centers[p] = (lo + hi) / 2
+        radii[p] = np.linalg.norm(loc - centers[p], axis=2).max() * (1 + slack) + 1e-3
+    rig = C.Rig(pts, ji, jw, np.eye(4), bind, rest, parents, np.arange(J), centers, radii, voff, order,
+                world=np.eye(4) if world is None else world, skinning_method="dualQuaternion")
+    return rig, clip, skel
+
+
+def _dense_dq(rig, clip, t0, t1, steps=48):
+    """(steps - 1, P) joint-space farthest distance of every part at sub-steps of [t0, t1]
+    (naive slerp and T R S; the skin by usd-core's own ``UsdSkel.SkinPoints(dualQuaternion)``)."""
+    out = []
+    for a in np.linspace(0, 1, steps + 1)[1:-1]:
+        tt = t0 + a * (t1 - t0)
+        i = min(int(np.floor(tt)), len(clip.times) - 2)
+        f = tt - i
+        skel = naive.compose(naive.trs((1 - f) * clip.vt[i] + f * clip.vt[i + 1], naive.slerp(clip.vr[i], clip.vr[i + 1], f),
+                                       _half_lerp(clip.vs[i], clip.vs[i + 1], f))[None], rig.parents)[0]
+        y = _usd_dqs(rig.points, rig.joint_indices, rig.joint_weights, (skel @ rig.inv_bind)[None], np.eye(4))[0]
+        far = np.zeros(rig.P)
+        for p in range(rig.P):
+            vs = rig.verts[rig.vert_offsets[p]:rig.vert_offsets[p + 1]]
+            N = skel[rig.part_joint[p]]
+            loc = (y[vs] - N[:3, 3]) @ np.linalg.inv(N[:3, :3]).T
+            far[p] = np.linalg.norm(loc - rig.part_centers[p], axis=1).max() if len(vs) else 0
+        out.append(far)
+    return np.array(out)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_dq_certificate_is_sound_against_dense_brute_force(seed):
+    """20 random DQS rigs: no certified interval has a dense in-between pose outside a sphere, and
+    the growth bound (a joint-space bound of the farthest vertex) is never below the dense maximum."""
+    rng = np.random.default_rng(300 + seed)
+    rig, clip, skel = random_dq_rig(rng, angle=0.3 + 0.05 * (seed % 5), slack=0.05 + 0.05 * (seed % 4))
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    assert (s.tier == 2).all()  # DQS parts are skinned exactly at the samples
+    ok = ~(s.dist > s.spheres[..., 3] * (1 + 1e-6))
+    c = CDQ.certificate(rig, clip, clip.times, s.bound, ok, 0.0, 1e-6)
+    g = CDQ.certificate(rig, clip, clip.times, s.bound, ok, 0.0, 0.0, rho=np.zeros(rig.P), growth=True, max_depth=5)
+    certified = (c.status == 1) | (c.status == 2)
+    for i in range(len(clip.times) - 1):
+        far = _dense_dq(rig, clip, clip.times[i], clip.times[i + 1]).max(0)
+        assert not (certified[i] & (far > rig.part_radii * (1 + 1e-6))).any(), (i, far, rig.part_radii)
+        assert np.all(far <= g.bound[i] * (1 + 1e-9)), (i, far, g.bound[i])
+    for f in c.failures:
+        if f["definite"]:
+            assert f["excess"] > 0
+    assert certified.mean() > 0.3  # the bound is not vacuous
+
+
+def test_dq_bound_is_tight_enough_that_one_percent_less_is_caught():
+    """The dense check has teeth: on some interval the growth bound is within 1% of the dense
+    maximum, so a bound 1% smaller (an unsound one) would fail the soundness test above."""
+    rng = np.random.default_rng(11)
+    rig, clip, skel = random_dq_rig(rng, angle=0.2)
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    g = CDQ.certificate(rig, clip, clip.times, s.bound, np.ones_like(s.bound, bool), 0.0, 0.0,
+                     rho=np.zeros(rig.P), growth=True, max_depth=8)
+    caught = False
+    for i in range(len(clip.times) - 1):
+        far = _dense_dq(rig, clip, clip.times[i], clip.times[i + 1], steps=64).max(0)
+        ends = np.maximum(s.dist[i], s.dist[i + 1])  # joint = stage space here (rigid, world = I)
+        far = np.maximum(far, ends)
+        assert np.all(far <= g.bound[i] * (1 + 1e-9))
+        caught |= bool(np.any(0.99 * g.bound[i] < far))
+    assert caught
+
+
+def test_dq_vertex_leaving_only_between_samples_by_a_rotation_is_caught_with_its_interval():
+    """A two-joint DQS limb whose child swings +0.9 rad then -0.9 rad: at both samples the tip is
+    inside the root's sphere, straight half-way it is outside; the interval is reported."""
+    parents = np.array([-1, 0])
+    rest = naive.trs([[0, 0, 0], [0, 1, 0]], [[0, 0, 0, 1.0]] * 2, np.ones((2, 3)))
+    bind = naive.compose(rest, parents)
+    y = np.linspace(1.0, 2.0, 11)
+    pts = np.c_[np.zeros_like(y), y, np.zeros_like(y)].astype(np.float32)
+    ji = np.c_[np.ones(11, np.int32), np.zeros(11, np.int32)]
+    jw = np.c_[np.full(11, 0.8), np.full(11, 0.2)].astype(np.float32)  # blended: DQS, not LBS, decides
+    qz = Rotation.from_rotvec([[0, 0, 0.9], [0, 0, -0.9]]).as_quat()
+    times = np.array([0.0, 1.0])
+    clip = Clip("swing", "/swing", times, np.tile([[[0, 0, 0], [0, 1, 0]]], (2, 1, 1)).astype(float), times,
+                np.stack([np.tile([0, 0, 0, 1.0], (2, 1)), np.tile([0, 0, 0, 1.0], (2, 1))], 0), times,
+                np.ones((2, 2, 3)), np.array([0, 1]), times)
+    clip.vr[:, 1] = qz
+    skel = naive.compose(naive.trs(clip.vt, clip.vr, clip.vs), parents)
+    yk = naive.naive_dqs(pts, ji, jw, skel @ np.linalg.inv(bind))
+    c = np.array([0.0, 0.5, 0.0])
+    r = np.linalg.norm(yk - c, axis=2).max() * (1 + 1e-6)
+    rig = C.Rig(pts, ji, jw, np.eye(4), bind, rest, parents, [0], c[None], [r], [0, 11], np.arange(11),
+                skinning_method="dualQuaternion")
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    ok = ~(s.bound > s.spheres[..., 3] * (1 + 1e-6))
+    assert ok.all()  # both samples inside
+    mid = naive.naive_dqs(pts, ji, jw, naive.compose(naive.trs(clip.vt[:1], np.tile([0, 0, 0, 1.0], (1, 2, 1)),
+                                                               clip.vs[:1]), parents) @ np.linalg.inv(bind))
+    assert np.linalg.norm(mid[0] - c, axis=1).max() > r * 1.05  # outside half-way (by DQS)
+    res = CDQ.certificate(rig, clip, times, s.bound, ok, 0.0, 1e-6)
+    assert res.status[0, 0] == 3 and len(res.failures) == 1
+    f = res.failures[0]
+    assert (f["t0"], f["t1"]) == (0.0, 1.0) and f["excess"] > 0.05 and 0 <= f["vertex"] < 11 and f["definite"]
+    assert abs(f["time"] - 0.5) <= 0.1
+
+
+@pytest.mark.parametrize("case", ["animated_scale", "mirrored_bind", "negative_weight"])
+def test_dq_certificate_fails_closed_outside_its_hypotheses(case):
+    """Where the DQS Lipschitz bound's hypotheses fail (scales that change between samples, a
+    mirrored skinning transform, negative weights) nothing is certified: undecided, with a reason."""
+    rng = np.random.default_rng(21)
+    rig, clip, skel = random_dq_rig(rng, angle=0.2, slack=0.5)
+    if case == "animated_scale":
+        clip.vs[1:] = np.float16(1.25)
+        skel = naive.compose(naive.trs(clip.vt, clip.vr, clip.vs), rig.parents)
+    elif case == "mirrored_bind":
+        bind = rig.bind.copy()
+        bind[2, :3, 0] *= -1
+        rig = C.Rig(rig.points, rig.joint_indices, rig.joint_weights, rig.geom_bind, bind, rig.rest_local, rig.parents,
+                    rig.part_joint, rig.part_centers, rig.part_radii, rig.vert_offsets, rig.verts,
+                    skinning_method="dualQuaternion")
+    else:
+        jw = rig.joint_weights.copy()
+        jw[0, 1] = -0.01
+        rig = C.Rig(rig.points, rig.joint_indices, jw, rig.geom_bind, rig.bind, rig.rest_local, rig.parents,
+                    rig.part_joint, rig.part_centers, rig.part_radii, rig.vert_offsets, rig.verts,
+                    skinning_method="dualQuaternion")
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    c = CDQ.certificate(rig, clip, clip.times, s.bound, np.ones_like(s.bound, bool), 0.0, 1e-6)
+    bad = np.ones(len(clip.times) - 1, bool)
+    if case == "animated_scale":
+        bad[1:] = False  # only the first interval's scales change
+    assert (c.status[bad] == 4).all() and not ((c.status[bad] == 1) | (c.status[bad] == 2)).any()
+    assert all("hypotheses" in f.get("reason", "") for f in c.failures if f["interval"] in np.flatnonzero(bad))

@@ -270,6 +270,36 @@ def b311(s):
     b.CreateBlendShapeTargetsRel().SetTargets([shape.GetPath()])
 
 
+def b312(s):
+    """A skinning method no UsdSkel consumer knows (Maya's per-vertex blend has no token)."""
+    s.GetPrimAtPath(MESH).CreateAttribute("primvars:skel:skinningMethod", Sdf.ValueTypeNames.Token,
+                                          custom=False, variability=Sdf.VariabilityUniform).Set("blended")
+
+
+def test_dual_quaternion_asset_is_not_col312_and_is_proven_with_dqs(good_path):
+    """A dualQuaternion mesh is posed and proven with DQS: no COL312, every frame skinned exactly
+    (tests K and D bound linear blends only), the between-frames proof still runs."""
+    stage = open_copy(good_path)
+    UsdSkel.BindingAPI(stage.GetPrimAtPath(MESH)).CreateSkinningMethodAttr().Set(UsdSkel.Tokens.dualQuaternion)
+    _edit(stage, MESH, "colossus:parts:radii", lambda r: (r * 1.3).astype(np.float32))  # room for DQS's shape
+    r = check_asset(stage)
+    assert "COL312" not in r.codes() and "COL403" not in r.codes(), [(f.code, f.message) for f in r.findings]
+    fp = r.stats["frameproof"]
+    assert fp["tiers"]["K"] == 0 and fp["tiers"]["D"] == 0 and fp["tiers"]["exact"] > 0
+    assert sum(fp["intervals"].values()) > 0
+
+
+def test_dual_quaternion_escape_between_frames_is_col407(good_path):
+    """b407's in-between escape on a dualQuaternion mesh: caught with its interval."""
+    stage = open_copy(good_path)
+    UsdSkel.BindingAPI(stage.GetPrimAtPath(MESH)).CreateSkinningMethodAttr().Set(UsdSkel.Tokens.dualQuaternion)
+    b407(stage)
+    r = check_asset(stage)
+    assert "COL403" not in r.codes(), [f.message for f in r.by_code("COL403")]
+    fs = r.by_code("COL407")
+    assert fs and all(f.interval is not None and f.interval[1] - f.interval[0] == 1.0 for f in fs)
+
+
 def b407(s):
     """Fails only between frames: ``bend`` swings mid and tip +-0.9 rad on alternate frames
     (straight half-way), centres moved off-axis, radii exactly as tight as the frames allow (the

@@ -6,6 +6,8 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from colossus.runtime import schema
+
 from .. import tolerances as tol
 from ..registry import hit, rule
 
@@ -60,10 +62,10 @@ def zero_area(asset, ctx):
     indices included).
     Why: a degenerate triangle has no normal: contact normals and winding checks are undefined.
     Example: a triangle `(5, 5, 9)`, or three collinear points."""
-    p = asset.bind_points[asset.tris]
-    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    area = np.where(np.isfinite(area), area, np.inf)
-    bad = np.nonzero(area <= (tol.ZERO_AREA_RELATIVE * asset.model_size) ** 2)[0]
+    # the one test, shared with the importer's `degenerate` stage (runtime.schema.zero_area_faces)
+    linear = (asset.skel_world @ asset.geom_bind)[:3, :3]
+    bad = np.nonzero(schema.zero_area_faces(asset.points, asset.tris, linear, asset.model_size,
+                                            tol.ZERO_AREA_RELATIVE))[0]
     if len(bad):
         yield hit(f"{len(bad)} triangles have zero area, first face {int(bad[0])}", face=int(bad[0]), count=len(bad))
 

@@ -167,3 +167,23 @@ def no_blend_shapes(asset, ctx):
     Example: a face mesh with `skel:blendShapes = ["smile"]` bound to `/Rig/Shapes/smile`."""
     if asset.blend_shapes:
         yield hit(f"the mesh has UsdSkel blend shapes: {asset.blend_shapes}", prim=str(asset.mesh.GetPath()))
+
+
+@rule("COL312", "skinning-method", "error",
+      "The collision mesh's primvars:skel:skinningMethod is one the runtime poses (classicLinear or dualQuaternion).",
+      needs=("mesh_raw",))
+def skinning_method(asset, ctx):
+    """What: `primvars:skel:skinningMethod` on the collision mesh is absent (UsdSkel's fallback,
+    `classicLinear`), `classicLinear` or `dualQuaternion`.
+    Why: the runtime, the frame proof and the continuous certificate pose the mesh with one of
+    those two methods exactly as UsdSkel does; any other token is one no UsdSkel consumer skins
+    (usd-core refuses it), so neither the shape a player meets nor the proof would exist.  The
+    proof is not run on such an asset.
+    Example: `uniform token primvars:skel:skinningMethod = "blended"` (Maya's per-vertex blend
+    has no UsdSkel token)."""
+    from colossus.runtime import schema
+
+    m = asset.skinning_method
+    if m not in schema.SKINNING_METHODS:
+        yield hit(f"primvars:skel:skinningMethod is {m!r}: the runtime poses {' and '.join(schema.SKINNING_METHODS)} "
+                  "only (nothing is proven for this mesh)", prim=str(asset.mesh.GetPath()))
