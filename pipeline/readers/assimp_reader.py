@@ -28,12 +28,18 @@ import numpy as np
 from ..errors import InputError
 from .common import AllocationBudget, check_finite, check_input_file
 from .fbx_header import read_anim_stacks, read_global_settings, read_inherit_types, read_morph_geometry
-from . import fbx_checks, fbx_doc
+from . import fbx_checks, fbx_doc, ogre
 from .collada_xml import read_clips, read_skins
 from .scene import Animation, Channel, Scene, SceneMesh, Skin
 from .scene.build import build
 
 FBX_HELPER = "_$AssimpFbx$_"
+
+
+def _extension(path) -> str:
+    """The file's extension as the reader table keys it (``.mesh.xml`` whole)."""
+    low = os.path.basename(os.fspath(path)).lower()
+    return ".mesh.xml" if low.endswith(".mesh.xml") else os.path.splitext(low)[1]
 
 
 def assimp_flags():
@@ -94,7 +100,7 @@ def read_scene(path, budget, fbx, doc=None) -> Scene:
     """Read any file assimp imports into a :class:`Scene`."""
     import assimp_py
 
-    ext = os.path.splitext(path)[1].lower()
+    ext = _extension(path)
     try:
         scene = assimp_py.import_file(path, assimp_flags())
     except Exception as exc:  # assimp reports every parse failure as a generic exception
@@ -180,6 +186,7 @@ def read_scene(path, budget, fbx, doc=None) -> Scene:
     stacks = read_anim_stacks(doc) if ext == ".fbx" else {}
     dae_clips = read_clips(path) if ext == ".dae" else []
     anims = []
+    is_ogre = ogre.is_ogre(path)  # Ogre plays rotations by nlerp (RIM_LINEAR), assimp's keys are its own
     for ai, a in enumerate(scene.animations):
         tps = float(a.ticks_per_second or 0.0) or hint or 25.0
         span = stacks.get(a.name)
@@ -209,14 +216,20 @@ def read_scene(path, budget, fbx, doc=None) -> Scene:
                     if np.any(nrm < 1e-12):
                         raise InputError(path, f"animation {a.name!r}, node {ch.node_name!r}: a zero rotation quaternion")
                     v = v / nrm[:, None]
-                chans.append(Channel(node, path_, t / tps + shift, v, "LINEAR"))
+                chans.append(Channel(node, path_, t / tps + shift, v, "NLERP" if is_ogre else "LINEAR"))
         name = a.name
+        if is_ogre and float(a.duration or 0.0) > 0.0:  # Ogre plays a track's gap to the length as a wrap
+            length = float(a.duration) / tps
+            chans = ogre.wrap_to_length(chans, length)
+            span = (0.0, length)
         if dae_clips and len(dae_clips) == len(scene.animations) and a.name == f"combinedAnim_{ai}":
             # assimp's name for the i-th <animation_clip>: the file's name and window instead
             name, lo, hi = dae_clips[ai]
             if np.isfinite(hi) and hi >= lo:
                 span = (lo, hi)
         anims.append(Animation(name, chans, span))
+    if is_ogre:  # Ogre adds a key's translation in the parent's space; assimp does not
+        ogre.mend_translations(nlocal, [a.channels for a in anims])
     helpers = {i for i, n in enumerate(names) if FBX_HELPER in n}
     if mended:
         notes.append(f"assimp's skin weights of {', '.join(mended)} did not follow the file's <vertex_weights> "
@@ -301,13 +314,16 @@ def read_assimp(path, meshes=None, fps=None):
     path = os.fspath(path)
     size = check_input_file(path)
     budget = AllocationBudget(path, size)
-    ext = os.path.splitext(path)[1].lower()
+    ext = _extension(path)
     if ext == ".fbx":
         why = fbx_checks.refusal(fbx_doc.file_version(path))
         if why:
             raise InputError(path, why)
     doc = fbx_doc.read_document(path) if ext == ".fbx" else None  # one parse for every FBX read here
     fbx = read_global_settings(doc) if ext == ".fbx" else {}
+    skeleton = None
+    if ogre.is_ogre(path):  # the skeleton it names: inside its folder, and present (assimp drops a missing one)
+        skeleton = ogre.check_skeleton(path)
     scene = read_scene(path, budget, fbx, doc)
     up, mpu, note = _source_frame(path, ext, fbx)
     mesh = build(scene, path, meshes=meshes, fps=fps, budget=budget,
@@ -328,4 +344,6 @@ def read_assimp(path, meshes=None, fps=None):
                     f"blend shapes of {', '.join(inert)} have DeformPercent 0 at rest and in every curve: "
                     "nothing of them to carry"]
         mesh.source["not_carried"] = items
+    if ogre.is_ogre(path):  # pose / morph animation, animation links: named, never dropped silently
+        mesh.source["not_carried"] = ogre.not_carried(path, skeleton)
     return mesh.replace(up_axis=up, meters_per_unit=mpu)

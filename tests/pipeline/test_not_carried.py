@@ -403,22 +403,47 @@ def _glb_with(tmp_path, edit, name):
     return out
 
 
+def _pointer_channel(a, ptr, sampler=0):
+    a["channels"].append({"sampler": a["channels"][sampler]["sampler"],
+                          "target": {"path": "pointer", "extensions": {"KHR_animation_pointer": {"pointer": ptr}}}})
+
+
 def test_gltf_extensions_that_move_the_body_are_named(tmp_path):
     def pointer(j):
         j["extensionsUsed"] = ["KHR_animation_pointer", "KHR_materials_volume", "VRMC_springBone"]
         a = j["animations"][0]
-        a["channels"].append({"sampler": a["channels"][0]["sampler"],
-                              "target": {"path": "pointer", "extensions": {
-                                  "KHR_animation_pointer": {"pointer": "/nodes/1/rotation"}}}})
+        rot = next(i for i, c in enumerate(a["channels"]) if c["target"].get("path") == "rotation")
+        _pointer_channel(a, "/nodes/1/rotation", rot)  # read as a plain channel (issue 20 item 7)
+        _pointer_channel(a, "/nodes/1/weights")        # morph weights: not carried, named
     p = _glb_with(tmp_path, pointer, "pointer")
     items = _items(p)
     assert [(x["what"], x["where"]) for x in items] == [("gltf_extension", ["KHR_animation_pointer"]),
                                                         ("gltf_extension", ["VRMC_springBone"])]
+    assert "/nodes/1/weights" in items[0]["detail"] and "/nodes/1/rotation" not in items[0]["detail"]
     _one_line_refusal(p, tmp_path, "gltf_extension")
-    # used, but only for materials, or pointers at materials: nothing
+    # used, but only for materials, pointers at materials, cameras or lights, or node transforms: nothing
     def harmless(j):
         j["extensionsUsed"] = ["KHR_materials_volume", "KHR_animation_pointer", "KHR_mesh_quantization"]
+        a = j["animations"][0]
+        rot = next(i for i, c in enumerate(a["channels"]) if c["target"].get("path") == "rotation")
+        for ptr in ("/materials/0/pbrMetallicRoughness/baseColorFactor", "/cameras/0/perspective/yfov",
+                    "/extensions/KHR_lights_punctual/lights/0/color"):
+            _pointer_channel(a, ptr)
+        _pointer_channel(a, "/nodes/2/rotation", rot)
     assert _items(_glb_with(tmp_path, harmless, "harmless")) == []
+    # what else under a node or a mesh can move the body stays named
+    for ptr in ("/meshes/0/weights", "/nodes/0/matrix", "/nodes/1/extensions/KHR_node_visibility/visible"):
+        q = _glb_with(tmp_path, lambda j, ptr=ptr: (j.update(extensionsUsed=["KHR_animation_pointer"]),
+                                                   _pointer_channel(j["animations"][0], ptr)), "named")
+        assert [x["where"] for x in _items(q)] == [["KHR_animation_pointer"]], ptr
+
+
+def test_gltf_animation_pointer_at_a_missing_node_is_refused_in_one_line(tmp_path):
+    p = _glb_with(tmp_path, lambda j: (j.update(extensionsUsed=["KHR_animation_pointer"]),
+                                       _pointer_channel(j["animations"][0], "/nodes/99/rotation")), "far")
+    r = _cli("import", p, "-o", tmp_path / "far.usda")
+    assert r.exit_code == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "far.glb" in r.stderr and "/nodes/99/rotation" in r.stderr
 
 
 def test_gltf_required_extension_not_read_is_refused_in_one_line(tmp_path):
