@@ -330,20 +330,7 @@ def read_assimp(path, meshes=None, fps=None):
                  source={"file": os.path.basename(path), "format": ext.lstrip("."), "reader": "assimp",
                          "frame": note})
     if ext == ".fbx":  # what the file says about deforming that assimp does not carry (fail closed)
-        items = fbx_checks.check(doc, mesh, scene)
-        if mesh.source.get("morph_meshes") and doc is not None:
-            try:
-                m_item, inert = fbx_checks.morph(doc, mesh)
-            except fbx_checks.MALFORMED as e:  # fail closed: the shapes are said not carried
-                m_item, inert = fbx_checks.unchecked("the blend shapes", e), []
-            mesh.source["morph_meshes"] = {}  # judged here: live channels only
-            if m_item is not None:
-                items.insert(0, m_item)
-            if inert:
-                mesh.source["notes"] = mesh.source.get("notes", []) + [
-                    f"blend shapes of {', '.join(inert)} have DeformPercent 0 at rest and in every curve: "
-                    "nothing of them to carry"]
-        mesh.source["not_carried"] = items
+        mesh.source["not_carried"] = fbx_checks.morph_records(doc, mesh) + fbx_checks.check(doc, mesh, scene)
     if ogre.is_ogre(path):  # pose / morph animation, animation links: named, never dropped silently
         mesh.source["not_carried"] = ogre.not_carried(path, skeleton)
     return mesh.replace(up_axis=up, meters_per_unit=mpu)

@@ -616,7 +616,7 @@ def read_ufbx(path, meshes=None, fps=None):
     rest_local = r.locals_of(r.world)
 
     anims = []
-    c_at, between = {}, []
+    between = []
     checks = [("rest", r.compose(rest_local))]
     for si, (name, span, seconds, worlds) in enumerate(stacks):
         chans, recomposed, trs = _channels(r, rest_local, seconds, worlds)
@@ -624,12 +624,9 @@ def read_ufbx(path, meshes=None, fps=None):
         for f in _check_frames(len(seconds)):
             label = f"{name} at {seconds[f]:.4g} s"
             checks.append((label, r.compose(recomposed[f])))
-            c_at[label] = c_frames[si][f] if fold else None
             if f + 1 < len(seconds):
                 mid = f"{name} between frames at {0.5 * (seconds[f] + seconds[f + 1]):.4g} s"
                 between.append((mid, r.compose(_halfway(rest_local, trs, f))))
-                c_at[mid] = "halfway"
-    c_at["rest"] = c_rest if fold else None
 
     sc = Scene(names=x.names, parents=x.parents, local=rest_local, meshes=scene_meshes, animations=anims,
                notes=notes, helpers=x.helpers, fps_hint=x.rate, unweighted_follow_node=True,
@@ -646,37 +643,14 @@ def read_ufbx(path, meshes=None, fps=None):
             "fbx_transform_skin", skinned[0]["name"],
             f"the skinned mesh's node moved after binding; {app or 'the authoring tool'} may move the skin "
             "with it (Maya does), the FBX SDK does not: taken as the FBX SDK", moved_by / size_ref))
-    worst, where = 0.0, "rest"
-    for label, ours in checks:
-        ref = x.exact.get(label)
-        if ref is None:  # no independent reference (a mesh ufbx's plain load names otherwise): unchecked
-            worst, where = np.inf, label
-            continue
-        c = c_at.get(label)
-        for info, (a, node_world) in zip(skinned, ref):
-            if c is not None:
-                a = a @ c[:3, :3].T + c[:3, 3]
-            b = _lbs(info, ours)
-            if len(a) and len(a) == len(b):
-                d = float(np.max(np.linalg.norm(a - b, axis=1))) / size_ref
-                if d > worst:
-                    worst, where = d, label
+    # Maya's transform_skin on the reference side: its own mesh node's change since binding
+    def transform_skin(label, info, node_world):
+        return node_world @ np.linalg.inv(info["bind_world"]) if fold else None
+
+    worst, where = _largest_gap(checks, x.exact, skinned, size_ref, transform_skin)
     # between frames: the file's curves against the keys' lerp / slerp (a resampling error, the
-    # same for every reader that samples curves on a grid; named when over the motion tolerance)
-    gap, gap_at = 0.0, ""
-    for label, ours in between:
-        ref = x.exact.get(label)
-        if ref is None:
-            continue
-        for info, (a, node_world) in zip(skinned, ref):
-            if fold:
-                c = node_world @ np.linalg.inv(info["bind_world"])
-                a = a @ c[:3, :3].T + c[:3, 3]
-            b = _lbs(info, ours)
-            if len(a) and len(a) == len(b):
-                d = float(np.max(np.linalg.norm(a - b, axis=1))) / size_ref
-                if d > gap:
-                    gap, gap_at = d, label
+    # same for every reader that samples curves on a grid; stated when over the motion tolerance)
+    gap, gap_at = _largest_gap(between, x.exact, skinned, size_ref, transform_skin, missing=0.0)
     mesh.source["between_frames"] = {"bound_relative": gap, "where": gap_at}
     if gap > BETWEEN_TOLERANCE:
         mesh.source["notes"] = mesh.source.get("notes", []) + [
@@ -693,22 +667,34 @@ def read_ufbx(path, meshes=None, fps=None):
     items = method_items + items
     doc = fbx_doc.read_document(path)
     items = fbx_checks.check(doc, mesh, None, only=fbx_checks.UFBX_CHECKS) + items
-    if mesh.source.get("morph_meshes") and doc is not None:
-        try:
-            m_item, inert = fbx_checks.morph(doc, mesh)
-        except fbx_checks.MALFORMED as e:
-            m_item, inert = fbx_checks.unchecked("the blend shapes", e), []
-        mesh.source["morph_meshes"] = {}
-        if m_item is not None:
-            items.insert(0, m_item)
-        if inert:
-            mesh.source["notes"] = mesh.source.get("notes", []) + [
-                f"blend shapes of {', '.join(inert)} have DeformPercent 0 at rest and in every curve: "
-                "nothing of them to carry"]
-    mesh.source["not_carried"] = items
+    mesh.source["not_carried"] = fbx_checks.morph_records(doc, mesh) + items
     return mesh.replace(up_axis=x.up, meters_per_unit=x.unit_meters)
 
 
+
+
+def _largest_gap(pairs, exact, skinned, size_ref, correction, missing=np.inf):
+    """``(largest / size_ref, label)`` of the vertex distance between ufbx's own skinned points
+    ``exact[label]`` (moved by ``correction(label, info, node_world)`` when not None: Maya's
+    transform_skin) and our keys' ``_lbs(info, ours)`` over ``pairs`` ``[(label, ours)]``; a label
+    with no reference counts as ``missing`` (infinite: unchecked)."""
+    worst, where = 0.0, ""
+    for label, ours in pairs:
+        ref = exact.get(label)
+        if ref is None:
+            if missing > worst:
+                worst, where = missing, label
+            continue
+        for info, (a, node_world) in zip(skinned, ref):
+            c = correction(label, info, node_world)
+            if c is not None:
+                a = a @ c[:3, :3].T + c[:3, 3]
+            b = _lbs(info, ours)
+            if len(a) and len(a) == len(b):
+                d = float(np.max(np.linalg.norm(a - b, axis=1))) / size_ref
+                if d > worst:
+                    worst, where = d, label
+    return worst, where
 
 
 def _skinning_method(mesh, skinned):

@@ -316,23 +316,28 @@ def test_fbx_instanced_skin_and_constraints(tmp_path, road, monkeypatch):
         assert whats.count("fbx_instanced_skin") == 1 and whats.count("fbx_constraints") == 1
 
 
+def _two_keys(flags):
+    """An edit cutting every moving curve to its first key and the one farthest from it, both with
+    the key flags ``flags`` (0x108 cubic ease, 0x104 linear)."""
+    def f(top):
+        for c in W.find(top, "AnimationCurve"):
+            kt = c.child("KeyTime").props[0][1]
+            kv = c.child("KeyValueFloat").props[0][1]
+            if np.ptp(kv) < 1e-3:
+                continue
+            mid = int(np.argmax(np.abs(kv - kv[0])))  # the key farthest from the first
+            W.set_child(c, "KeyTime", [("l", kt[[0, mid]])])
+            W.set_child(c, "KeyValueFloat", [("f", kv[[0, mid]])])
+            W.set_child(c, "KeyAttrFlags", [("i", np.array([flags], dtype=np.int32))])
+            W.set_child(c, "KeyAttrDataFloat", [("f", np.zeros(4, dtype=np.float32))])
+            W.set_child(c, "KeyAttrRefCount", [("i", np.array([2], dtype=np.int32))])
+    return f
+
+
 def test_fbx_cubic_curve_between_sparse_keys(tmp_path, assimp_road):
     """Rotation curves cut to their first key and the one farthest from it, with a cubic (ease) segment: the grid
     frames in between are off the straight line assimp draws; made linear, nothing fires."""
-    def edit(flags):
-        def f(top):
-            for c in W.find(top, "AnimationCurve"):
-                kt = c.child("KeyTime").props[0][1]
-                kv = c.child("KeyValueFloat").props[0][1]
-                if np.ptp(kv) < 1e-3:
-                    continue
-                mid = int(np.argmax(np.abs(kv - kv[0])))  # the key farthest from the first
-                W.set_child(c, "KeyTime", [("l", kt[[0, mid]])])
-                W.set_child(c, "KeyValueFloat", [("f", kv[[0, mid]])])
-                W.set_child(c, "KeyAttrFlags", [("i", np.array([flags], dtype=np.int32))])
-                W.set_child(c, "KeyAttrDataFloat", [("f", np.zeros(4, dtype=np.float32))])
-                W.set_child(c, "KeyAttrRefCount", [("i", np.array([2], dtype=np.int32))])
-        return f
+    edit = _two_keys
     cubic = _limb(tmp_path, edit(0x108), "cubic")
     for p in cubic:
         items = _items(p)
@@ -344,19 +349,7 @@ def test_fbx_cubic_curve_through_ufbx_is_evaluated_at_every_frame(tmp_path, ufbx
     """ufbx evaluates the cubic segment at every grid frame: the frames are the curve's, nothing to name."""
     from colossus.pipeline.readers import read
 
-    def edit(top):
-        for c in W.find(top, "AnimationCurve"):
-            kt = c.child("KeyTime").props[0][1]
-            kv = c.child("KeyValueFloat").props[0][1]
-            if np.ptp(kv) < 1e-3:
-                continue
-            mid = int(np.argmax(np.abs(kv - kv[0])))
-            W.set_child(c, "KeyTime", [("l", kt[[0, mid]])])
-            W.set_child(c, "KeyValueFloat", [("f", kv[[0, mid]])])
-            W.set_child(c, "KeyAttrFlags", [("i", np.array([0x108], dtype=np.int32))])
-            W.set_child(c, "KeyAttrDataFloat", [("f", np.zeros(4, dtype=np.float32))])
-            W.set_child(c, "KeyAttrRefCount", [("i", np.array([2], dtype=np.int32))])
-    p = _limb(tmp_path, edit, "cubic", ascii_too=False)[0]
+    p = _limb(tmp_path, _two_keys(0x108), "cubic", ascii_too=False)[0]
     assert _items(p) == []
     # every grid frame is the curve's own: between the two keys the clip is off the straight
     # (slerp) line assimp would draw, by the ease
