@@ -546,3 +546,31 @@ def test_col701_proxy_deviation_within_max_deviation(good_path):
     assert "COL701" in check_asset(stage).codes()
     with pytest.raises(Exception):
         check_asset(stage, max_deviation="wide")
+
+
+@pytest.mark.parametrize("arc", ["reference", "payload", "none"])
+def test_col004_looks_inside_variants(good_path, tmp_path, arc):
+    """The clip variants are local opinions, not arcs to files: an asset with them is read and
+    passes; a reference or payload to another file authored inside a variant is COL004 (read from
+    the layer alone, the named file never opened) and the runtime refuses it."""
+    from colossus.runtime import ColliderError, load_collider
+
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "o.usda").write_text("#usda 1.0\n")
+    layer = Sdf.Layer.OpenAsAnonymous(str(good_path))
+    variant = layer.GetPrimAtPath(ROOT).variantSets["clip"].variants["twist"].primSpec
+    if arc != "none":
+        spec = Sdf.PrimSpec(variant, "Extra", Sdf.SpecifierOver)
+        arcs = spec.referenceList if arc == "reference" else spec.payloadList
+        arcs.Prepend(Sdf.Reference("outside/o.usda") if arc == "reference" else Sdf.Payload("outside/o.usda"))
+    asset = tmp_path / "a.usda"
+    asset.write_text(layer.ExportToString())
+    r = check_asset(str(asset))
+    if arc == "none":
+        assert r.findings == [], [(f.code, f.message) for f in r.findings]
+        assert load_collider(asset).clips == ["bend", "twist"]
+        return
+    assert r.codes() == {"COL004"} and "outside/o.usda" in r.findings[0].message
+    with pytest.raises(ColliderError, match="names other files"):
+        load_collider(asset)
