@@ -262,6 +262,43 @@ def test_col408_guide_sphere_breakages(good_path):
     assert "names no part" in m
 
 
+def _clip_vset_spec(s):
+    return s.GetRootLayer().GetPrimAtPath(ROOT).variantSets["clip"]
+
+
+def b509(s):
+    """An asset whose 'twist' clip no USD tool can reach: its variant is gone."""
+    vs = _clip_vset_spec(s)
+    vs.RemoveVariant(vs.variants["twist"])
+
+
+def test_col509_clip_variant_breakages(good_path):
+    """Each way the clip variants can fail other tools is named: a variant binding another clip, a
+    selection other than the first clip, a local animationSource overriding the variants, no
+    variant set at all."""
+    def findings(edit):
+        stage = open_copy(good_path)
+        edit(stage)
+        r = check_asset(stage)
+        assert not r.by_code("COL002"), [f.message for f in r.by_code("COL002")]
+        return [f.message for f in r.by_code("COL509")]
+
+    def wrong_target(s):
+        v = _clip_vset_spec(s).variants["twist"].primSpec
+        v.nameChildren["Skeleton"].relationships["skel:animationSource"].targetPathList.explicitItems = [
+            Sdf.Path(f"{ROOT}/bend")]
+    (m,) = findings(wrong_target)
+    assert "variant 'twist' binds" in m
+    (m,) = findings(lambda s: s.GetPrimAtPath(ROOT).GetVariantSets().GetVariantSet("clip").SetVariantSelection("twist"))
+    assert "selection is 'twist'" in m
+    (m,) = findings(lambda s: s.GetPrimAtPath(SKEL).GetRelationship("skel:animationSource").SetTargets(
+        [Sdf.Path(f"{ROOT}/bend")]))
+    assert "stronger than every variant" in m
+    (m,) = findings(lambda s: s.GetRootLayer().GetPrimAtPath(ROOT).variantSetNameList.ClearEdits() or
+                    s.GetRootLayer().GetPrimAtPath(ROOT).variantSets.__delitem__("clip"))
+    assert "no variant set 'clip'" in m
+
+
 def test_clip_variants_bind_every_clip(good_path):
     """The fixture, as the contract says: switching the SkelRoot's 'clip' variant binds that clip
     (the composed skel:animationSource), the first the default, and the validator is clean under
