@@ -855,3 +855,16 @@ def test_readme_runtime_example_runs(imported):
     stage_point = inv[:3, :3] @ hits.point[0] + inv[:3, 3]
     np.testing.assert_allclose(stage_point, pose.track(hits.triangle[:1], hits.barycentric[:1])[0], atol=1e-6)
     assert np.abs(cs.depth).max() <= 0.3 + 1e-9
+
+
+@pytest.mark.parametrize("name", ["odd", "odd_skel"])
+def test_guide_spheres_bake_to_pose_spheres_under_prim_transforms(name, odd_path, odd_skel_path):
+    """The independent fixture's guide spheres, with a transformed (x1.5) SkelRoot and a
+    geomBindTransform on the mesh, or a transformed (x0.8) Skeleton prim: UsdSkel.BakeSkinning of
+    each clip variant puts them on the runtime's ``pose.spheres`` (and the mesh on ``pose.points``)
+    within 1e-6 x size on every frame."""
+    from usdskel_bake import bake_every_variant
+
+    b = bake_every_variant(odd_path if name == "odd" else odd_skel_path)
+    assert sorted(b["variants"]) == ["bend", "twist"] and b["guides"] == 3
+    assert b["spheres"] <= 1e-6 * b["size"] and b["mesh"] <= 1e-6 * b["size"], (b["spheres"], b["mesh"], b["size"])
