@@ -534,3 +534,21 @@ def test_reference_code_imports_nothing_of_the_project():
                 [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else [])
             for n in names:
                 assert n.split(".")[0] not in {"colossus", "pipeline", "validators", "runtime"}, (f.name, node.lineno, n)
+
+
+@pytest.mark.parametrize("name", ["realworld/playcanvas_lumberjack.glb", "assimp/huesitos.fbx"])
+def test_corpus_guide_spheres_and_clip_variants_as_usd_bakes_them(corpus, tmp_path, name):
+    """Issue 24 items 2 and 3 on real characters (the lumberjack: a centimetre mesh bound by scaled
+    joints, 3 clips): one ``clip`` variant per clip, the first the default; each variant baked by
+    ``UsdSkel.BakeSkinning`` is the runtime's pose of that clip, and the guide spheres baked with it
+    are the runtime's ``pose.spheres``, within 1e-6 x size (8 frames of each clip)."""
+    from colossus.pipeline.run import import_asset
+    from usdskel_bake import bake_every_variant
+
+    out = tmp_path / "asset.usda"
+    result = import_asset(corpus / name, out)
+    b = bake_every_variant(out, frames_per_clip=8)
+    assert sorted(b["variants"]) == sorted(b["clips"]) and b["default"] == b["clips"][0]  # USD sorts variant names
+    assert b["guides"] == len(result.mesh.parts)
+    assert b["spheres"] <= 1e-6 * b["size"] and b["mesh"] <= 1e-6 * b["size"], (b["spheres"] / b["size"],
+                                                                                b["mesh"] / b["size"])
