@@ -10,11 +10,12 @@ contact, or None.  It is conservative: it may report a contact slightly early, n
 
 **The body's motion between the two poses** (:class:`BodyMotion`).  Two poses of one clip
 (``col.pose(clip, t)``) move as UsdSkel interpolates the clip from ``t_prev`` to ``t_next`` (either
-direction): the step is cut at the clip's samples in between into *segments*, on each of which every
+direction, when they are at most half the clip's duration apart): the step is cut at the clip's samples in between into *segments*, on each of which every
 animated joint's local transform is ``T R S`` with the translation and scale lerped and the rotation
 slerped between the segment's ends (a sub-interval of a UsdSkel interval is again one).  Any other
 pair (:meth:`Collider.pose_from_joints` results, the rest pose, two clips, the skeleton's
-transform animated) is one segment of the same joint-space interpolation between the two poses'
+transform animated, or two times of a clip further apart: a looping clip that wrapped around, a
+jump) is one segment of the same joint-space interpolation between the two poses'
 joint-local transforms, each decomposed as ``T R S`` (scale = column norms; a negative determinant
 flips the first axis; shear is refused with ``ValueError``), rotations on the shortest arc.  The
 player is at ``c0 + f (c1 - c0)`` at step fraction ``f``; a clip segment from time ``a`` to ``b``
@@ -175,7 +176,13 @@ def interpolate_locals(local0, local1, alpha):
     :func:`sweep_sphere` assumes between two poses that are not two times of one clip)."""
     t0, q0, s0 = decompose(local0)
     t1, q1, s1 = decompose(local1)
+    return _interpolate_trs(t0, q0, s0, t1, q1, s1, alpha)
+
+
+def _interpolate_trs(t0, q0, s0, t1, q1, s1, alpha):
     a = float(alpha)
+    q0 = q0 / np.linalg.norm(q0, axis=1, keepdims=True)
+    q1 = q1 / np.linalg.norm(q1, axis=1, keepdims=True)
     d = np.einsum("jk,jk->j", q0, q1)
     q1 = np.where(d[:, None] < 0, -q1, q1)
     d = np.abs(d)
@@ -210,10 +217,13 @@ class BodyMotion:
             raise ValueError("the poses belong to different colliders")
         d = col.data
         self.collider = col
-        same_world = np.array_equal(pose_prev.local_to_world, pose_next.local_to_world)
-        if pose_prev.clip is not None and pose_prev.clip == pose_next.clip and same_world \
-                and d.static_local_to_world is not None:
+        clip = None
+        if pose_prev.clip is not None and pose_prev.clip == pose_next.clip and d.static_local_to_world is not None:
             clip = col._clip(pose_prev.clip)
+            span = float(clip.times[-1] - clip.times[0]) if len(clip.times) else 0.0
+            if abs(float(pose_next.time) - float(pose_prev.time)) > 0.5 * span:
+                clip = None  # a jump (a looping clip wrapped around): the joint-space path
+        if clip is not None:
             ta, tb = float(pose_prev.time), float(pose_next.time)
             lo, hi = min(ta, tb), max(ta, tb)
             inner = clip.times[(clip.times > lo) & (clip.times < hi)]
@@ -228,10 +238,18 @@ class BodyMotion:
             self.fractions = (times - ta) / span if span != 0 else np.linspace(0.0, 1.0, len(times))
         else:
             L = np.stack([pose_prev._local, pose_next._local])
-            dec = [decompose(x) for x in L]
-            t, q, s = (np.stack([x[i] for x in dec]) for i in range(3))
-            # one quaternion sign for both ends is irrelevant (factor_terms takes the shortest arc)
-            anim = np.arange(len(d.joints), dtype=np.int64)
+            if pose_prev.clip is not None and pose_prev.clip == pose_next.clip:
+                # two times of one clip: the clip's own T R S at both (float32 quaternions are not
+                # exactly unit, so the matrices are not decomposed)
+                c = col._clip(pose_prev.clip)
+                L, t, q, s = PK.locals_at(c, [pose_prev.time, pose_next.time], d.rest_local, trs=True,
+                                          compiled=True)
+                anim = np.ascontiguousarray(c.anim_to_skel, dtype=np.int64)
+            else:
+                dec = [decompose(x) for x in L]
+                t, q, s = (np.stack([x[i] for x in dec]) for i in range(3))
+                anim = np.arange(len(d.joints), dtype=np.int64)
+            self._trs = (t, q, s, anim)
             self.clip = None
             self.poses = [pose_prev, pose_next]
             self.fractions = np.array([0.0, 1.0])
@@ -293,7 +311,10 @@ class BodyMotion:
         if self.clip is not None:
             ta, tb = self.poses[0].time, self.poses[-1].time
             return col.pose(self.clip, ta + f * (tb - ta), out=out)
-        return col.pose_from_joints(interpolate_locals(self._locals[0], self._locals[1], f), out=out)
+        t, q, s, anim = self._trs
+        local = col.data.rest_local.copy()
+        local[anim] = _interpolate_trs(t[0], q[0], s[0], t[1], q[1], s[1], f)
+        return col.pose_from_joints(local, out=out)
 
 
 def _norm2(m):
