@@ -270,3 +270,34 @@ def test_the_player_is_never_inside_nor_passed_through(request, sample, clip, sp
 @pytest.mark.parametrize("sample,clip,speed,kind,limit", cases(99))
 def test_the_player_is_never_inside_nor_passed_through_1000_steps(request, sample, clip, speed, kind, limit):
     _check(request, sample, clip, speed, kind, limit, (1000, 1000))
+
+
+def test_a_scripted_run_records_pushes_and_play_colours_them(limb):
+    """runtime.script records Step.pushed per step; ``colossus play`` colours such a frame."""
+    from colossus.render.run import PUSHED_COLOUR, STATE_COLOURS, frame_colour
+    from colossus.runtime.script import Run
+
+    col = limb
+    r = 0.035 * col.size()
+    got = placement(col, "bend", moving_parts(col, "bend", r, 1)[0], "ground", r, 16)
+    t0, pos, floor, _ = got
+    ctrl = CharacterController(col, r, position=pos, floor=floor)
+    a, b = col.pose("bend", t0), col.pose("bend", t0)
+    steps = []
+    for k in range(20):
+        col.pose("bend", ping_pong(col, "bend", t0, k + 1, 16), out=b)
+        steps.append(ctrl.step(a, b, 1 / RATE))
+        a, b = b, a
+    pushed = np.array([s.pushed for s in steps])
+    assert pushed.any() and all((s.push_triangle >= 0) == s.pushed for s in steps)
+    n = len(steps)
+    run = Run(clip="bend", radius=r, rate=RATE, times=np.arange(n, dtype=float), seconds=np.arange(n) / RATE,
+              states=np.array([s.state for s in steps]), positions=np.array([s.position for s in steps]),
+              triangles=np.full(n, -1), penetration=np.zeros(n), slip=np.zeros(n), energy=np.ones(n),
+              on_floor=np.zeros(n, bool), pushed=pushed)
+    k = int(np.argmax(pushed))
+    assert frame_colour(run, k - 1, k) == (True, PUSHED_COLOUR)
+    calm = np.flatnonzero(~pushed)
+    if len(calm):
+        j = int(calm[0])
+        assert frame_colour(run, j - 1, j) == (False, STATE_COLOURS[steps[j].state])
