@@ -106,23 +106,27 @@ def test_the_deviation_bound_holds_on_dense_sub_steps(limb, creature, case):
 
 
 def test_loosening_the_bound_by_one_percent_fails(limb):
-    """Where the chord deviation is nearly all curvature (one joint turning at constant speed
-    about an axis through it, the part far from it), the bound is within 1 % of the truth... and
-    the query reports a grazing contact no earlier than a 1 %-looser bound would."""
+    """The limb turned about an axis through its root, at constant speed: its tip part's chord
+    deviation is nearly all curvature, and the bound (the certificate's recursion, its 1 %
+    acceleration margin and the ball around the part's vertices) is within 3 % of the true
+    largest deviation (dense, 256 sub-steps): 2.5 % above it today, so a bound 1 % looser (or a
+    re-derived weaker one) fails here, and a smaller one than the truth fails the first check."""
     col = limb
     J = len(col.joints)
     q0 = np.tile([0.0, 0.0, 0.0, 1.0], (J, 1))
-    theta = 0.04
-    q1 = q0.copy()
-    q1[0] = Rotation.from_rotvec([theta, 0, 0]).as_quat()
-    a = col.pose_from_joints(rotations=q0)
-    b = col.pose_from_joints(rotations=q1)
-    m = BodyMotion(a, b)
-    f, P = _dense_points(m, 256)
-    true = _max_chord_deviation(m, f, P)
-    tip = int(np.argmax(true[0]))
-    ratio = m.deviation[0, tip] / true[0, tip]
-    assert 1.0 <= ratio < 1.10, ratio
+    for theta in (0.04, 0.2):
+        q1 = q0.copy()
+        q1[0] = Rotation.from_rotvec([theta, 0, 0]).as_quat()
+        a = col.pose_from_joints(rotations=q0)
+        b = col.pose_from_joints(rotations=q1)
+        m = BodyMotion(a, b)
+        f, P = _dense_points(m, 256)
+        true = _max_chord_deviation(m, f, P)[0]
+        assert (true <= m.deviation[0]).all()
+        tip = int(np.argmax(true))
+        ratio = m.deviation[0, tip] / true[tip]
+        assert 1.0 <= ratio < 1.03, ratio
+        assert not m.deviation[0, tip] * 1.01 / true[tip] < 1.03  # the 1 %-looser bound fails
 
 
 def test_the_query_never_misses_a_dense_contact(limb, creature):
