@@ -72,8 +72,9 @@ import numpy as np
 from . import kernels as B
 from .certify import ALPHA_MARGIN, OMEGA_MARGIN
 from .collider import Pose
+from .kernels import interval as IK
 from .kernels import pose as PK
-from .kernels.swept import _first_contact
+from .kernels.swept import _part_deviation, _sweep_segment
 
 #: Conservative advancement stops this close (x radius) to a contact, or after MAX_ITER steps.
 TOLERANCE = 1e-3
@@ -124,6 +125,32 @@ def _root_paths(data):
         got = (np.array(off, np.int64), np.array(pj, np.int64), np.ones(len(pj), np.int64), pair_part)
         bd._sweep_root_paths = got
     return got
+
+
+def _factor_terms(d, L, t, q, s, anim):
+    """:func:`runtime.kernels.interval.factor_terms` (its kernel, the same numbers), with the
+    constant joints' rows (an SVD of the rest transforms) computed once per asset."""
+    bd = d.bounds
+    rows = getattr(bd, "_sweep_rest_rows", None)
+    if rows is None:
+        sv = np.linalg.svd(d.rest_local[:, :3, :3], compute_uv=False)
+        with np.errstate(divide="ignore"):
+            inv = np.where(sv[:, -1] > 0, 1.0 / sv[:, -1], np.inf)
+        rows = bd._sweep_rest_rows = (sv[:, 0] * (1 + 1e-12), inv * (1 + 1e-12),
+                                      sv[:, 0] - sv[:, -1] <= 1e-12 * sv[:, 0])
+    L = np.ascontiguousarray(L, dtype=np.float64)
+    T, J = L.shape[:2]
+    I = T - 1
+    fw, iv = np.zeros((I, J, 3)), np.zeros((I, J, 3))
+    fw[:, :, 0] = rows[0][None]
+    iv[:, :, 0] = rows[1][None]
+    iso = np.repeat(rows[2][None], I, 0)
+    dt, eps = np.zeros((I, J)), np.zeros((I, J, 2))
+    Li = np.empty_like(L)
+    f64 = (lambda a: np.ascontiguousarray(a, dtype=np.float64))
+    IK._factor_terms(L, f64(t), f64(q), f64(s), np.ascontiguousarray(anim, dtype=np.int64), float(OMEGA_MARGIN),
+                     float(ALPHA_MARGIN), IK.HALF_LERP_REL, Li, fw, iv, dt, eps, iso)
+    return Li, fw, iv, dt, eps
 
 
 # -- joint-space interpolation of arbitrary poses ---------------------------------------------------
@@ -230,7 +257,13 @@ class BodyMotion:
             if tb < ta:
                 inner = inner[::-1]
             times = np.concatenate([[ta], inner, [tb]])
-            L, t, q, s = PK.locals_at(clip, times, d.rest_local, trs=True, compiled=True)
+            ka, kb = pose_prev._trs.get(clip.name), pose_next._trs.get(clip.name)
+            if not len(inner) and ka is not None and kb is not None:  # the poses' own T R S (no recompute)
+                L = np.stack([pose_prev._local, pose_next._local])
+                v = np.concatenate([ka, kb])
+                t, q, s = v[..., :3], v[..., 3:7], v[..., 7:]
+            else:
+                L, t, q, s = PK.locals_at(clip, times, d.rest_local, trs=True, compiled=True)
             anim = clip.anim_to_skel
             self.clip = clip.name
             self.poses = [pose_prev] + [col.pose(clip.name, float(x)) for x in inner] + [pose_next]
@@ -261,8 +294,7 @@ class BodyMotion:
         bd = d.bounds
         I = len(L) - 1
         P = len(bd.part_joint)
-        Li, fw, iv, dt, eps, _ = B.factor_terms(L, t, q, s, anim, d.rest_local, OMEGA_MARGIN, ALPHA_MARGIN,
-                                                compiled=True)
+        Li, fw, iv, dt, eps = _factor_terms(d, L, t, q, s, anim)
         off, pj, pd, pair_part = _root_paths(d)
         M = len(bd.pj_joint)
         e0, e1, delta, lam, pert = (np.zeros((I, M)) for _ in range(5))
@@ -271,17 +303,6 @@ class BodyMotion:
             B.chain_bounds(c(L[:-1]), c(L[1:]), c(Li[:-1]), c(Li[1:]), fw, iv, dt, eps, off, pj, pd,
                            bd.pj_center, bd.pj_radius, pair_part, np.zeros((P, 3)), e0, e1, delta, lam, pert,
                            compiled=True)
-        dl = delta + pert
-        starts = bd.pj_offsets[:-1]
-        nonempty = np.diff(bd.pj_offsets) > 0
-        dmax = np.zeros((I, P))
-        dsum = np.zeros((I, P))
-        if M and nonempty.any():
-            dmax[:, nonempty] = np.maximum.reduceat(dl, starts[nonempty], axis=1)
-            dsum[:, nonempty] = np.add.reduceat(dl * bd.pj_wmax[None], starts[nonempty], axis=1)
-        with np.errstate(invalid="ignore"):
-            dev = np.minimum(bd.part_wabs[None] * dmax, dsum)
-        dev = np.where(np.isnan(dev), np.inf, dev)
         W0, W1 = self.poses[0].local_to_world, self.poses[-1].local_to_world
         if W0 is W1 and W0 is d.static_local_to_world:  # the usual case: computed once per asset
             w = getattr(bd, "_sweep_world_norm", None)
@@ -289,15 +310,16 @@ class BodyMotion:
                 w = bd._sweep_world_norm = _norm2(W0[:3, :3])
         else:
             w = max(_norm2(W0[:3, :3]), _norm2(W1[:3, :3]))
-        dev = dev * w
+        dev = np.empty((I, P))
+        _part_deviation(delta, pert, bd.pj_offsets, bd.pj_wmax, bd.part_wabs, w, dev)
         if not np.array_equal(W0, W1):  # one segment; the travel term of the lerped world matrix
             c0, c1 = self.poses[0].cull, self.poses[-1].cull
             s0 = np.c_[c0[:, :3], np.ones(P)] @ np.linalg.inv(W0).T
             s1 = np.c_[c1[:, :3], np.ones(P)] @ np.linalg.inv(W1).T
             travel = (np.linalg.norm(s0[:, :3] - s1[:, :3], axis=1) + c0[:, 3] / _sigma_min(W0[:3, :3])
                       + c1[:, 3] / _sigma_min(W1[:3, :3]))
-            dev = dev + 0.25 * _norm2(W0[:3, :3] - W1[:3, :3]) * travel[None]
-        return dev * (1.0 + 1e-9)
+            dev = (dev + 0.25 * _norm2(W0[:3, :3] - W1[:3, :3]) * travel[None]) * (1.0 + 1e-9)
+        return dev
 
     @property
     def segments(self) -> int:
@@ -349,22 +371,24 @@ def sweep_sphere(pose_prev: Pose, pose_next: Pose, c0, c1, radius, *, ignore=Non
     m = motion if motion is not None else BodyMotion(pose_prev, pose_next)
     if m.poses[0] is not pose_prev or m.poses[-1] is not pose_next:
         raise ValueError("motion is of other poses")
-    skip = None
+    skip = np.zeros(len(pose_prev.collider.data.triangles), bool)
     if ignore is not None:
-        skip = np.zeros(len(pose_prev.collider.data.triangles), bool)
         skip[np.asarray(ignore, dtype=np.int64).ravel()] = True
     out = np.empty(11)
+    T = pose_prev.collider.data.triangles
     for i in range(m.segments):
-        k, faces, fpart, xa, xb, ca, cb = _segment(m, i, c0, c1, r, skip, out, 1.0)
+        f, p, ca, cb = _segment(m, i, c0, c1, r, skip, out, 1.0)
         if reach is not None:
             reach[i] = out[10]
-        if k >= 0:
+        if f >= 0:
             fr = m.fractions
             tau = float(out[0])
             span = fr[i + 1] - fr[i]
             bary = out[1:4].copy()
-            vel = bary @ (xb[k] - xa[k]) / span if span > 0 else np.zeros(3)
-            return SweptContact(time=float(fr[i] + tau * span), triangle=int(faces[k]), part=int(fpart[k]),
+            xa = m.poses[i]._points[T[f]].astype(np.float64)
+            xb = m.poses[i + 1]._points[T[f]].astype(np.float64)
+            vel = bary @ (xb - xa) / span if span > 0 else np.zeros(3)
+            return SweptContact(time=float(fr[i] + tau * span), triangle=int(f), part=int(p),
                                 barycentric=bary, point=out[4:7].copy(), normal=out[7:10].copy(), velocity=vel,
                                 centre=ca + tau * (cb - ca), segment=i)
     return None
@@ -374,9 +398,8 @@ def segment_reach(motion: BodyMotion, i: int, c0, c1, radius, ignore=None) -> fl
     """A bound of how far any point of the triangles that can come within ``radius`` of the
     sphere's path moves relative to its centre over segment ``i`` of ``motion`` (0 when none
     can): a sub-step of the segment of fraction ``g`` moves them at most ``g`` times it."""
-    skip = None
+    skip = np.zeros(len(motion.collider.data.triangles), bool)
     if ignore is not None:
-        skip = np.zeros(len(motion.collider.data.triangles), bool)
         skip[np.asarray(ignore, dtype=np.int64).ravel()] = True
     out = np.empty(11)
     _segment(motion, i, _vec(c0, "c0"), _vec(c1, "c1"), float(radius), skip, out, 0.0)
@@ -385,9 +408,8 @@ def segment_reach(motion: BodyMotion, i: int, c0, c1, radius, ignore=None) -> fl
 
 def _segment(m, i, c0, c1, r, skip, out, limit):
     """Segment ``i`` of the query: cull the parts, run the kernel on the rest (contacts before
-    ``limit`` in the segment's tau).  Returns (k, faces, fpart, xa, xb, ca, cb); ``out[10]`` the reach."""
+    ``limit`` in the segment's tau).  Returns (face, part, ca, cb); ``out[10]`` the reach."""
     d = m.collider.data
-    T = d.triangles
     fr = m.fractions
     out[10] = 0.0
     pa, pb = m.poses[i], m.poses[i + 1]
@@ -406,28 +428,18 @@ def _segment(m, i, c0, c1, r, skip, out, limit):
     mag = np.maximum(np.abs(A[:, :3]).sum(1), np.abs(Bc[:, :3]).sum(1)) + np.maximum(A[:, 3], Bc[:, 3])
     pad = dev * (1 + 1e-5) + 2e-6 * mag + 1e-9
     near = np.flatnonzero(gap <= np.maximum(A[:, 3], Bc[:, 3]) + pad + r)
-    none = (-1, None, None, None, None, ca, cb)
     if not len(near):
-        return none
-    faces, fdev, fpart = [], [], []
-    for p in near:
-        f = d.faces[d.face_offsets[p]:d.face_offsets[p + 1]]
-        if skip is not None:
-            f = f[~skip[f]]
-        faces.append(f)
-        fdev.append(np.full(len(f), pad[p]))
-        fpart.append(np.full(len(f), p))
-    faces = np.ascontiguousarray(np.concatenate(faces).astype(np.int64))
-    if not len(faces):
-        return none
-    fdev = np.concatenate(fdev)
-    fpart = np.concatenate(fpart)
+        return -1, -1, ca, cb
+    fo = d.face_offsets
+    faces = d.faces[fo[near[0]]:fo[near[0] + 1]] if len(near) == 1 else \
+        np.concatenate([d.faces[fo[p]:fo[p + 1]] for p in near])
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
     pa._ready_faces(faces)
     pb._ready_faces(faces)
-    xa = pa._points[T[faces]].astype(np.float64)
-    xb = pb._points[T[faces]].astype(np.float64)
-    k = _first_contact(xa, xb, fdev, ca, cb, r, TOLERANCE * r, MAX_ITER, limit, out)
-    return k, faces, fpart, xa, xb, ca, cb
+    f, p = _sweep_segment(pa._points, pb._points, d.triangles, d.faces, d.chunk_offsets, d.part_chunks,
+                          d.chunk_vert_offsets, d.chunk_verts, near.astype(np.int64), pad, skip, ca, cb, r,
+                          TOLERANCE * r, MAX_ITER, limit, out)
+    return f, p, ca, cb
 
 
 def _vec(a, name):

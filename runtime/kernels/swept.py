@@ -27,25 +27,35 @@ import math
 import numpy as np
 from numba import njit
 
-from .config import FASTMATH_OFF
+from .config import FASTMATH_OFF, FASTMATH_PROOF
 from .triangle import closest_on_triangle
 
 
 @njit(cache=True, fastmath=FASTMATH_OFF)
-def _first_contact(xa, xb, dev, c0, c1, radius, tol, max_iter, limit, out):
-    """First contact of the sphere ``(c(tau), radius)`` with the inflated chord triangles.
+def _sweep_segment(pa, pb, tris, faces, chunk_offsets, part_chunks, chunk_vert_offsets, chunk_verts, near, pad,
+                   skip, c0, c1, radius, tol, max_iter, limit, out):
+    """First contact of the sphere ``(c(tau), radius)`` with the inflated chord triangles of the
+    parts ``near`` over one segment.
 
-    xa, xb : (K, 3, 3) float64 corners at the segment's ends; dev : (K,) inflation of each;
-    c0, c1 : (3,) the centre at the ends; radius, tol : float; max_iter : int; limit : float, only
-    contacts before it are looked for (1.0 for the whole segment).
+    pa, pb : (V, 3) float32 posed points at the segment's ends (the corners of the near parts'
+    faces skinned at both); tris (F, 3); faces, chunk_offsets, part_chunks, chunk_vert_offsets,
+    chunk_verts: the asset's CSR of each part's chunks of faces and each chunk's vertices
+    (:class:`runtime.asset.ColliderData`); near : (N,) parts; pad : (P,) each part's inflation;
+    skip : (F,) bool faces left out; c0, c1 : (3,) the centre at the ends; radius, tol : float;
+    max_iter : int; limit : float, only contacts before it (in tau) are looked for (0: none, the
+    reach alone).
 
-    Returns the index of the first triangle touched (-1: none before ``limit``) and writes
-    ``out`` (11,): tau, barycentric (3), point on ``T(tau)`` (3), unit normal of ``T(tau)``
+    A chunk is skipped when the box of its vertices at both ends, grown by its part's ``pad``
+    and ``radius``, misses the box of the centre's path (every point of the chunk's chord
+    triangles lies in the box of their corners at both ends; the true ones within ``pad``); so is
+    a face, by the same test on its corners.
+
+    Returns (face, part) of the first contact (-1, -1: none before ``limit``) and writes ``out``
+    (11,): tau, barycentric (3), point on ``T(tau)`` (3), unit normal of ``T(tau)``
     (counter-clockwise = outward; the direction to the centre for a degenerate triangle) (3),
-    and ``reach``: over the triangles whose swept boxes meet the sphere's, the largest
-    ``L + 4 dev`` (a bound of any of their points' motion relative to the centre, per unit tau:
-    the chord's plus ``4 dev`` for the deviation's slope, ``|e'| <= sup|e''| / 2 = 4 dev``)."""
-    K = xa.shape[0]
+    and ``reach``: over the faces not skipped by the box tests, the largest ``L + 4 pad`` (a
+    bound of any of their points' motion relative to the centre, per unit tau: the chord's plus
+    ``4 pad`` for the deviation's slope, ``|e'| <= sup|e''| / 2 = 4 D``)."""
     vcx, vcy, vcz = c1[0] - c0[0], c1[1] - c0[1], c1[2] - c0[2]
     lo = np.empty(3)
     hi = np.empty(3)
@@ -54,61 +64,116 @@ def _first_contact(xa, xb, dev, c0, c1, radius, tol, max_iter, limit, out):
         hi[a] = max(c0[a], c1[a])
     tri = np.empty((3, 3))
     cp = np.empty(6)
+    bmin = np.empty(3)
+    bmax = np.empty(3)
     best = limit
     found = -1
+    fpart = -1
     reach = 0.0
-    for k in range(K):
-        pad = radius + dev[k]
-        skip = False
-        for a in range(3):
-            mn = min(xa[k, 0, a], xa[k, 1, a], xa[k, 2, a], xb[k, 0, a], xb[k, 1, a], xb[k, 2, a]) - pad
-            mx = max(xa[k, 0, a], xa[k, 1, a], xa[k, 2, a], xb[k, 0, a], xb[k, 1, a], xb[k, 2, a]) + pad
-            if mx < lo[a] or mn > hi[a]:
-                skip = True
-        if skip:
-            continue
-        L = 0.0
-        for i in range(3):
-            dx = xb[k, i, 0] - xa[k, i, 0] - vcx
-            dy = xb[k, i, 1] - xa[k, i, 1] - vcy
-            dz = xb[k, i, 2] - xa[k, i, 2] - vcz
-            L = max(L, math.sqrt(dx * dx + dy * dy + dz * dz))
-        reach = max(reach, L + 4.0 * dev[k])
-        tau = 0.0
-        it = 0
-        while tau < best:
-            for i in range(3):
+    for ni in range(near.shape[0]):
+        p = near[ni]
+        g = radius + pad[p]
+        for c in range(part_chunks[p], part_chunks[p + 1]):
+            for a in range(3):
+                bmin[a] = np.inf
+                bmax[a] = -np.inf
+            for i in range(chunk_vert_offsets[c], chunk_vert_offsets[c + 1]):
+                q = chunk_verts[i]
                 for a in range(3):
-                    tri[i, a] = xa[k, i, a] + tau * (xb[k, i, a] - xa[k, i, a])
-            px = c0[0] + tau * vcx
-            py = c0[1] + tau * vcy
-            pz = c0[2] + tau * vcz
-            closest_on_triangle(px, py, pz, tri, 0, 1, 2, cp)
-            dx, dy, dz = px - cp[0], py - cp[1], pz - cp[2]
-            f = math.sqrt(dx * dx + dy * dy + dz * dz) - pad
-            it += 1
-            if f <= tol or it > max_iter:
-                best = tau
-                found = k
-                out[0] = tau
+                    x = np.float64(pa[q, a])
+                    y = np.float64(pb[q, a])
+                    bmin[a] = min(bmin[a], x, y)
+                    bmax[a] = max(bmax[a], x, y)
+            miss = False
+            for a in range(3):
+                if bmax[a] + g < lo[a] or bmin[a] - g > hi[a]:
+                    miss = True
+            if miss:
+                continue
+            for fi in range(chunk_offsets[c], chunk_offsets[c + 1]):
+                f = faces[fi]
+                if skip[f]:
+                    continue
+                miss = False
                 for a in range(3):
-                    out[1 + a] = cp[3 + a]
-                    out[4 + a] = cp[a]
-                e1x, e1y, e1z = tri[1, 0] - tri[0, 0], tri[1, 1] - tri[0, 1], tri[1, 2] - tri[0, 2]
-                e2x, e2y, e2z = tri[2, 0] - tri[0, 0], tri[2, 1] - tri[0, 1], tri[2, 2] - tri[0, 2]
-                nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
-                nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-                if nn > 0.0:
-                    out[7], out[8], out[9] = nx / nn, ny / nn, nz / nn
-                else:
-                    d = math.sqrt(dx * dx + dy * dy + dz * dz)
-                    if d > 0.0:
-                        out[7], out[8], out[9] = dx / d, dy / d, dz / d
-                    else:
-                        out[7], out[8], out[9] = 0.0, 0.0, 0.0
-                break
-            if L <= 0.0:
-                break  # nothing moves relative to the centre: never closer than now
-            tau += f / L
+                    mn = np.inf
+                    mx = -np.inf
+                    for i in range(3):
+                        x = np.float64(pa[tris[f, i], a])
+                        y = np.float64(pb[tris[f, i], a])
+                        mn = min(mn, x, y)
+                        mx = max(mx, x, y)
+                    if mx + g < lo[a] or mn - g > hi[a]:
+                        miss = True
+                if miss:
+                    continue
+                L = 0.0
+                for i in range(3):
+                    v = tris[f, i]
+                    dx = np.float64(pb[v, 0]) - np.float64(pa[v, 0]) - vcx
+                    dy = np.float64(pb[v, 1]) - np.float64(pa[v, 1]) - vcy
+                    dz = np.float64(pb[v, 2]) - np.float64(pa[v, 2]) - vcz
+                    L = max(L, math.sqrt(dx * dx + dy * dy + dz * dz))
+                reach = max(reach, L + 4.0 * pad[p])
+                tau = 0.0
+                it = 0
+                while tau < best:
+                    for i in range(3):
+                        v = tris[f, i]
+                        for a in range(3):
+                            x = np.float64(pa[v, a])
+                            tri[i, a] = x + tau * (np.float64(pb[v, a]) - x)
+                    px = c0[0] + tau * vcx
+                    py = c0[1] + tau * vcy
+                    pz = c0[2] + tau * vcz
+                    closest_on_triangle(px, py, pz, tri, 0, 1, 2, cp)
+                    dx, dy, dz = px - cp[0], py - cp[1], pz - cp[2]
+                    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+                    fv = dist - g
+                    it += 1
+                    if fv <= tol or it > max_iter:
+                        best = tau
+                        found = f
+                        fpart = p
+                        out[0] = tau
+                        for a in range(3):
+                            out[1 + a] = cp[3 + a]
+                            out[4 + a] = cp[a]
+                        e1x, e1y, e1z = tri[1, 0] - tri[0, 0], tri[1, 1] - tri[0, 1], tri[1, 2] - tri[0, 2]
+                        e2x, e2y, e2z = tri[2, 0] - tri[0, 0], tri[2, 1] - tri[0, 1], tri[2, 2] - tri[0, 2]
+                        nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+                        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+                        if nn > 0.0:
+                            out[7], out[8], out[9] = nx / nn, ny / nn, nz / nn
+                        elif dist > 0.0:
+                            out[7], out[8], out[9] = dx / dist, dy / dist, dz / dist
+                        else:
+                            out[7], out[8], out[9] = 0.0, 0.0, 0.0
+                        break
+                    if L <= 0.0:
+                        break  # nothing moves relative to the centre: never closer than now
+                    tau += fv / L
     out[10] = reach
-    return found
+    return found, fpart
+
+
+@njit(cache=True, fastmath=FASTMATH_PROOF)
+def _part_deviation(delta, pert, pj_offsets, pj_wmax, part_wabs, w, out):
+    """``out[i, p] = w min(a_P max_b (delta + pert)[i, b], sum_b wmax_b (delta + pert)[i, b])``
+    over part ``p``'s (part, joint) pairs ``b`` (:mod:`runtime.sweep` derives it), padded by
+    ``1e-9`` relative; 0 for a part without pairs; a NaN reads as unbounded (inf)."""
+    I = delta.shape[0]
+    P = pj_offsets.shape[0] - 1
+    for i in range(I):
+        for p in range(P):
+            mx = 0.0
+            sm = 0.0
+            bad = False
+            for k in range(pj_offsets[p], pj_offsets[p + 1]):
+                x = delta[i, k] + pert[i, k]
+                if not (x >= 0.0):
+                    bad = True
+                mx = max(mx, x)
+                sm += pj_wmax[k] * x
+            v = min(part_wabs[p] * mx, sm) * w * (1.0 + 1e-9)
+            out[i, p] = math.inf if (bad or not (v >= 0.0)) else v
