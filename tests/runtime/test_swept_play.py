@@ -301,3 +301,24 @@ def test_a_scripted_run_records_pushes_and_play_colours_them(limb):
     if len(calm):
         j = int(calm[0])
         assert frame_colour(run, j - 1, j) == (False, STATE_COLOURS[steps[j].state])
+
+
+def test_an_airborne_player_hit_by_the_fast_limb_is_pushed_and_inherits_its_velocity(limb):
+    """No gravity, no grab: the limb's leading face swings into the player at 16x.  The step
+    reports the push, the player ends outside the limb, touching the face's side it was on, and
+    moves away with at least the surface's normal speed (it does not sink back in next step)."""
+    col = limb
+    r = 0.035 * col.size()
+    part = moving_parts(col, "bend", r, 1)[0]
+    t0, pos, _, _ = placement(col, "bend", part, "holding", r, 16)
+    ctrl = CharacterController(col, r, position=pos, gravity=0.0)
+    a = col.pose("bend", t0)
+    b = col.pose("bend", ping_pong(col, "bend", t0, 1, 16))
+    s = ctrl.step(a, b, 1 / RATE)
+    assert s.pushed and s.push_triangle >= 0
+    shells = Shells(col.triangles)
+    P = b.points.astype(np.float64)
+    assert (shells.winding(P, s.position) < 0.5).all()
+    assert closest_distances(P, col.triangles, s.position).min() > r - 0.01 * r
+    nrm = b.face_normals([s.push_triangle])[0]
+    assert ctrl.velocity @ nrm > 0  # moving away from the face it was hit by
