@@ -91,6 +91,8 @@ parameter           default                            meaning
 ``tolerance``       0.002 x radius                     penetration left unresolved
 ``max_iterations``  4                                  resolution queries per sub-step
 ``floor``           None                               height of a static terrain plane (None: none)
+``sweep_body``      True                               sweep the body's own motion (below); False is
+                                                       the thesis' step (the body static within it)
 ==================  =================================  ==============================================
 
 **The body's own motion is swept too** (issue 25; ``sweep_body``, default on).  Between the
@@ -108,6 +110,13 @@ centre) and the player is resolved at each sub-pose: pushed out along the surfac
 side it was on, so it stays outside a closed shell.  A pushed airborne player inherits the
 surface's velocity along the contact normal (the part of its velocity into the moving surface is
 removed); the step's :attr:`Step.pushed` says a push happened.
+
+Limits, stated: the sub-step count bounds the motion of the triangles that can come within
+``radius + skin`` plus two radii of the player's unpushed path (a push that carries it further
+within one step is not counted); the triangles it already touched are carried, not swept (one of
+them that turns and sweeps through it within the step is resolved at the sub-poses only); a
+player wedged between the terrain plane and a face coming straight down cannot be cleared
+(thesis figure 16) and stays where the resolution leaves it.
 """
 
 from __future__ import annotations
