@@ -33,7 +33,7 @@ from colossus.runtime.kernels import skin as SK
 
 RATE = 60.0
 SUB = 64
-CI_STEPS = 120
+CI_STEPS = 60
 SPEEDS = (1, 4, 16)
 KINDS = ("standing", "holding", "ground")
 
