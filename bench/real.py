@@ -469,7 +469,8 @@ def runtime_row(ch: Character, repeat=50) -> dict:
         trimesh.proximity.closest_point(m, player[None])
 
     base2 = _median(trimesh_frame, max(5, repeat // 5), warm=1)
-    return {"name": ch.name, "vertices": len(col.data.rest_points), "parts": col.parts, "clip": clip,
+    step_s, swept_s, query_s = _controller_steps(col, clip, repeat)
+    return {"step_s": step_s, "swept_step_s": swept_s, "query_s": query_s, "name": ch.name, "vertices": len(col.data.rest_points), "parts": col.parts, "clip": clip,
             "pose_s": ours1, "lbs_s": base1, "pose_vs_lbs": base1 / ours1,
             "frame_s": ours2, "trimesh_frame_s": base2, "frame_vs_trimesh": base2 / ours2,
             "embree": bool(trimesh.ray.has_embree)}
@@ -486,7 +487,44 @@ def format_runtime_rows(rows) -> str:
                      f"game frame (pose + 1 sphere + 16 rays) {r['frame_s'] * 1e3:.3f} ms vs trimesh"
                      f"{' + embree' if r['embree'] else ''} {r['trimesh_frame_s'] * 1e3:.3f} ms = "
                      f"{r['frame_vs_trimesh']:.1f}x")
+        if r.get("step_s") is not None:
+            lines.append(f"  {'':<40} controller step standing (pose excluded): today {r['step_s'] * 1e6:.0f} us, "
+                         f"body swept {r['swept_step_s'] * 1e6:.0f} us (goal < 100 us: "
+                         f"{'met' if r['swept_step_s'] < 1e-4 else 'NOT met'}); continuous query per call "
+                         f"(1x, its bound included) {r['query_s'] * 1e6:.0f} us")
     return "\n".join(lines)
+
+
+def _controller_steps(col, clip, repeat):
+    """Median controller step (pose excluded) of a player standing on the character through its
+    clip at 60 Hz: today's (``sweep_body=False``) and with the body swept; and one continuous
+    query per call (:func:`bench.runtime.bench_sweep`)."""
+    from colossus.bench.runtime import bench_sweep
+    from colossus.runtime.controller import CharacterController
+    from colossus.runtime.script import start_position
+
+    times = col.frame_times(clip)
+    r = 0.035 * col.size()
+    tc = col.data.time_codes_per_second
+    steps = max(60, 2 * repeat)
+    out = []
+    for sweep in (False, True):
+        a, b = col.pose(clip, float(times[0])), col.pose(clip, float(times[0]))
+        ctrl = CharacterController(col, r, position=start_position(col, clip, r, 0.0), sweep_body=sweep)
+        for _ in range(5):
+            ctrl.step(a, a, 1 / 60)
+        span = float(times[-1] - times[0])
+        dts = []
+        for k in range(steps):
+            t = float(times[0]) + ((k + 1) * tc / 60) % span if span > 0 else float(times[0])
+            b = col.pose(clip, t, out=b)
+            t0 = time.perf_counter()
+            ctrl.step(a, b, 1 / 60)
+            dts.append(time.perf_counter() - t0)
+            a, b = b, a
+        out.append(float(np.median(dts)))
+    q, _, _ = bench_sweep(col, clip, float(times[len(times) // 2]), speed=1.0, repeat=repeat)
+    return out[0], out[1], q
 
 
 def _rows(fn, items):

@@ -450,8 +450,10 @@ def dependencies(src: str, allow_outside: bool = False) -> list:
     """The files ``src`` pulls in, in a stable order, followed recursively: a glTF's external
     buffers (``buffers[].uri``, as :mod:`pipeline.readers.gltf_reader` reads them) and a USD
     layer's sublayers, references, payloads and value clips
-    (:func:`runtime.references.layer_references`).  A reference that cannot be resolved is listed
-    as ``missing:<ref>``, so the key changes when the file appears.  Other formats: none."""
+    (:func:`runtime.references.layer_references`), and an Ogre mesh's skeleton (the file its
+    skeleton link names, as :mod:`pipeline.readers.ogre` reads it).  A reference that cannot be
+    resolved is listed as ``missing:<ref>``, so the key changes when the file appears.  Other
+    formats: none."""
     from colossus.runtime.references import OutsideReference, resolve
 
     out, seen = [], {os.path.realpath(src)}
@@ -462,6 +464,8 @@ def dependencies(src: str, allow_outside: bool = False) -> list:
         low = f.lower()
         if low.endswith((".gltf", ".glb")):
             refs = [(r, "buffer") for r in _gltf_buffer_uris(f)]
+        elif low.endswith((".mesh", ".mesh.xml")):
+            refs = [(r, "skeleton") for r in _ogre_skeleton_names(f)]
         elif low.endswith((".usd", ".usda", ".usdc")):
             try:
                 from colossus.runtime.references import layer_references
@@ -480,6 +484,25 @@ def dependencies(src: str, allow_outside: bool = False) -> list:
             seen.add(k)
             out.append(p)
             todo.append(p)
+    return out
+
+
+def _ogre_skeleton_names(path: str) -> list:
+    """The skeleton files an Ogre mesh may read: each link, and for an XML mesh ``<link>.xml``
+    first (the names :func:`pipeline.readers.ogre.check_skeleton` checks); those present, else the
+    first name (missing: the key changes when it appears)."""
+    from colossus.pipeline.readers import ogre
+
+    try:
+        links = ogre.skeleton_links(path)
+    except Exception:
+        return []  # an unreadable source: the import says why
+    folder = os.path.dirname(os.path.abspath(path))
+    out = []
+    for link in links:
+        names = [link + ".xml", link] if path.lower().endswith(".xml") and link.lower().endswith(".skeleton") else [link]
+        present = [n for n in names if os.path.lexists(os.path.join(folder, n))]
+        out += present or names[:1]
     return out
 
 

@@ -32,6 +32,8 @@ The ``what`` ids (README, "Not carried"):
 ``fbx_curve_interpolation``  cubic / constant FBX curve segments spanning grid frames (assimp
                           interpolates every curve linearly between its keys)
 ``gltf_extension``        a glTF extension used that changes geometry or deformation, not read
+``ogre_vertex_animation``  an Ogre mesh's pose / morph (vertex) animation (assimp makes no clip)
+``ogre_animation_link``   an Ogre skeleton's links to another skeleton's animations (not read)
 ``usd_skinning_method``   meshes that mix ``primvars:skel:skinningMethod`` values: the collision
                           mesh carries one (the method of most points; a USD source whose
                           meshes agree has its method carried, linear or dual-quaternion)

@@ -14,6 +14,17 @@ MAX_FRAMES = 60
 #: The player's colour in the GIF, by controller state.
 STATE_COLOURS = {"standing": "#3a9e4f", "sliding": "#e08a1e", "holding": "#2f6fd0",
                  "hanging": "#8e3fc0", "falling": "#d0312d"}
+#: The player's colour on a frame where the moving body pushed it (since the previous frame shown).
+PUSHED_COLOUR = "#f2c200"
+
+
+def frame_colour(run, prev, i):
+    """(pushed, colour) of the player on the frame of step ``i`` when the previous frame shown was
+    step ``prev``: :data:`PUSHED_COLOUR` when the moving body pushed it on a step in between, else
+    its state's colour."""
+    pushed = getattr(run, "pushed", None)
+    hit = pushed is not None and bool(np.any(pushed[prev + 1:i + 1]))
+    return hit, PUSHED_COLOUR if hit else STATE_COLOURS.get(str(run.states[i]), "#3a9e4f")
 
 
 def render_run_gif(col, run, path, size=(480, 360), max_frames=MAX_FRAMES):
@@ -54,13 +65,16 @@ def render_run_gif(col, run, path, size=(480, 360), max_frames=MAX_FRAMES):
     label = pl.add_text(" ", font_size=9, color="black")
     fps = col.data.time_codes_per_second * len(idx) / max(len(run.times), 1)
     pl.open_gif(os.fspath(path), fps=max(1, int(round(fps))))
+    prev = -1
     for i in idx:
         pose = col.pose(run.clip, run.times[i], out=pose)
         mesh.points = pose.points.astype(np.float64)
         ball.points = ball_pts + run.positions[i]
         state = str(run.states[i])
-        ball_actor.prop.color = STATE_COLOURS.get(state, "#3a9e4f")
-        text = f"{run.clip}  t={run.times[i]:.4g}  {state}"
+        hit, colour = frame_colour(run, prev, i)
+        prev = i
+        ball_actor.prop.color = colour
+        text = f"{run.clip}  t={run.times[i]:.4g}  {state}" + ("  pushed" if hit else "")
         if state in ("holding", "hanging"):
             text += f"  energy {run.energy[i]:.0%}"
         if hasattr(label, "set_text"):  # a CornerAnnotation (pyvista >= 0.43)

@@ -2,7 +2,10 @@
 
 The layout is the contract's (``../shared/CONTRACT.md``): one ``SkelRoot`` (the default prim)
 holding a ``Skeleton``, a triangle ``Mesh`` bound to it with UsdSkel influences and the
-``colossus:parts:*`` attributes, and one ``SkelAnimation`` per clip (file order).
+``colossus:parts:*`` attributes, and one ``SkelAnimation`` per clip (file order).  What the asset
+holds for other USD tools is not read: the part spheres come from ``colossus:parts:*`` (the guide
+``UsdGeom.Sphere`` prims under ``PartSpheres`` are not meshes, so never the collider), and every
+clip is listed as a child of the SkelRoot whatever the ``clip`` variant selection binds.
 """
 
 from __future__ import annotations

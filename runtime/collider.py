@@ -31,6 +31,7 @@ from .kernels import pose as PK
 from .kernels import query as QK
 from .kernels import skin as SK
 from .errors import ColliderError
+from .placement import Placement
 from .results import RayHits, SphereContacts, SurfacePoints
 
 #: Above this many vertices a pose's full skin runs on every core.  With the per-vertex kernel
@@ -270,15 +271,23 @@ class Pose:
 
     # -- queries
 
-    def raycast(self, origins, directions, max_distance=np.inf, backend=None) -> RayHits:
+    def raycast(self, origins, directions, max_distance=np.inf, backend=None, world=None) -> RayHits:
         """Nearest hit of each ray ``origins + t * directions``, ``0 <= t <= max_distance``.
 
         origins, directions : (R, 3) (a single (3,) ray is accepted); directions need not be
-        unit (they are normalised; distances are stage units). Both sides of a triangle hit."""
+        unit (they are normalised; distances are stage units). Both sides of a triangle hit.
+        world : (4, 4) or :class:`runtime.placement.Placement`, optional: the collider's stage ->
+        world transform (column-vector; rotation, uniform scale, translation): rays,
+        ``max_distance`` and every result in world space (:mod:`runtime.placement`)."""
         o = _vec3s(origins, "origins")
         dirs = _vec3s(directions, "directions")
         if o.shape != dirs.shape:
             raise ValueError(f"origins {o.shape} and directions {dirs.shape} differ in shape")
+        if world is not None:
+            place = Placement.of(world)
+            hits = self.raycast(place.to_stage(o), place.vectors_to_stage(dirs),
+                                float(max_distance) / place.scale, backend)
+            return place.ray_hits(hits)
         # scaled by its largest component first: a finite but huge direction (1e200) would overflow
         # its norm to inf and become a zero direction, a silent miss
         big = np.abs(dirs).max(axis=1) if len(dirs) else np.zeros(0)
@@ -291,14 +300,18 @@ class Pose:
             raise ValueError(f"max_distance must be >= 0, got {max_distance}")
         return (get_backend(backend) or self.collider.backend).raycast(self, o, dirs, md)
 
-    def sphere_contacts(self, center, radius, backend=None) -> SphereContacts:
-        """Every triangle whose closest point lies within ``radius`` of ``center`` (3,)."""
+    def sphere_contacts(self, center, radius, backend=None, world=None) -> SphereContacts:
+        """Every triangle whose closest point lies within ``radius`` of ``center`` (3,).
+        ``world``: as :meth:`raycast` (centre, radius and the contacts in world space)."""
         c = _point(center)
         if c is None:
             raise ValueError(f"center must be 3 finite numbers, got {center!r}")
         r = float(radius)
         if not (r >= 0 and math.isfinite(r)):
             raise ValueError(f"radius must be finite and >= 0, got {radius!r}")
+        if world is not None:
+            place = Placement.of(world)
+            return place.sphere_contacts(self.sphere_contacts(place.to_stage(c[None])[0], r / place.scale, backend))
         return (get_backend(backend) or self.collider.backend).sphere_contacts(self, c, r)
 
     def track(self, triangles, barycentric) -> np.ndarray:

@@ -91,11 +91,32 @@ parameter           default                            meaning
 ``tolerance``       0.002 x radius                     penetration left unresolved
 ``max_iterations``  4                                  resolution queries per sub-step
 ``floor``           None                               height of a static terrain plane (None: none)
+``sweep_body``      True                               sweep the body's own motion (below); False is
+                                                       the thesis' step (the body static within it)
 ==================  =================================  ==============================================
 
-The surface's own motion between ``pose_prev`` and ``pose_next`` is not swept (the thesis
-treats the colossus as static within a step): a limb that sweeps through the player faster
-than about a radius per step can still pass it; step at the rate the body's speed needs.
+**The body's own motion is swept too** (issue 25; ``sweep_body``, default on).  Between the
+carry and the intent, :func:`runtime.sweep.sweep_sphere` asks whether the body, moving from
+``pose_prev`` to ``pose_next`` (a clip between its two times, or the joint-space interpolation of
+two arbitrary poses: :class:`runtime.sweep.BodyMotion`), meets the player on its way from where it
+was to where the carry put it (what it touched at the end of the last step and its anchors are
+carried, not swept: they are left out, of the query and of the resolution below; the query's radius is the
+player's less twice ``tolerance``, so resting contacts are not hits).  The query is conservative,
+culled per part by a certified bound of how far the body strays from its chord.  When it reports a
+contact, the body is stepped from the contact's time to ``pose_next`` in sub-steps that move no
+triangle near the player by more than ``substep`` relative to it (the same argument as the sweep
+below, with the roles swapped: each sub-step starts resolved, so the body cannot jump over the
+centre) and the player is resolved at each sub-pose: pushed out along the surface it met, on the
+side it was on, so it stays outside a closed shell.  A pushed airborne player inherits the
+surface's velocity along the contact normal (the part of its velocity into the moving surface is
+removed); the step's :attr:`Step.pushed` says a push happened.
+
+Limits, stated: the sub-step count bounds the motion of the triangles that can come within
+``radius + skin`` plus two radii of the player's unpushed path (a push that carries it further
+within one step is not counted); the triangles it already touched are carried, not swept (one of
+them that turns and sweeps through it within the step is resolved at the sub-poses only); a
+player wedged between the terrain plane and a face coming straight down cannot be cleared
+(thesis figure 16) and stays where the resolution leaves it.
 """
 
 from __future__ import annotations
@@ -108,6 +129,7 @@ import numpy as np
 from .collider import Collider, Pose
 from .kernels.contact import _MIN_COS, _along, _carry, _length, _summarize, _tangential
 from .results import SurfacePoints
+from .sweep import BodyMotion, segment_reach, sweep_sphere
 
 STANDING, SLIDING, HOLDING, HANGING, FALLING = "standing", "sliding", "holding", "hanging", "falling"
 #: Every state, in a fixed order (their index is the state's code in arrays).
@@ -192,6 +214,8 @@ class Step:
     energy : float, 0..1
     on_floor : bool, touching the terrain plane
     substeps, queries : int, sweep sub-steps and sphere contact queries this step
+    pushed : bool, the moving body hit the player this step and pushed it (module docstring)
+    push_triangle : int, the triangle the body's sweep met first (-1: none)
     """
 
     time: float
@@ -208,6 +232,8 @@ class Step:
     on_floor: bool
     substeps: int
     queries: int
+    pushed: bool = False
+    push_triangle: int = -1
 
 
 # -- public wrappers of the kernels ------------------------------------------------------------
@@ -279,7 +305,7 @@ class CharacterController:
                  jump_speed=None, gravity=None, max_fall_speed=None, hold_speed=None,
                  max_slope=MAX_SLOPE, hang_drain=HANG_DRAIN, energy_refill=ENERGY_REFILL,
                  skin=None, snap=None, substep=None, tolerance=None, max_iterations=MAX_ITERATIONS,
-                 floor=None, position=None):
+                 floor=None, position=None, sweep_body=True):
         if not isinstance(collider, Collider):
             raise TypeError(f"collider must be a runtime Collider, got {type(collider).__name__}")
         self.collider = collider
@@ -318,6 +344,8 @@ class CharacterController:
         self._g = -self.up * self.gravity
         self._cos_slope = math.cos(math.radians(self.max_slope))
         self._feel = r + self.skin
+        self.sweep_body = bool(sweep_body)
+        self._scratch = None
         self.place(np.zeros(3) if position is None else position)
 
     # -- public
@@ -338,6 +366,7 @@ class CharacterController:
         self.energy = 1.0
         self.normal = self.up.copy()
         self._v_rel = _ZERO
+        self._resting = None  # the body triangles it touched at the end of the last step
         self._unanchor()
 
     @property
@@ -372,6 +401,10 @@ class CharacterController:
         else:
             v_surf, held_speed = _ZERO, 0.0
         carried = pos
+        # 1b. the body's own motion, swept (module docstring)
+        push_tri = NO_TRIANGLE
+        if self.sweep_body and _moves(pose_prev, pose_next):
+            pos, push_tri = self._body_sweep(pose_prev, pose_next, dt, state, pos)
         # 2. intent: transitions it causes, then the state's own motion
         if state in (HOLDING, HANGING) and not it.grab:
             state = self._release(v_surf + self._v_rel)
@@ -409,6 +442,7 @@ class CharacterController:
                 state = self._release(v_surf)
         self.state = state
         self.position = pos
+        self._resting = touch.triangle[touch.triangle >= 0]
         if state == FALLING:
             slip, velocity = 0.0, self.velocity.copy()
         else:
@@ -422,9 +456,67 @@ class CharacterController:
                     held_speed=held_speed,
                     triangle=int(touch.triangle[deep]) if deep >= 0 else NO_TRIANGLE,
                     penetration=max(0.0, float(touch.summary[3])), slip=slip, energy=self.energy,
-                    on_floor=touch.on_floor, substeps=substeps, queries=self._queries)
+                    on_floor=touch.on_floor, substeps=substeps, queries=self._queries,
+                    pushed=push_tri != NO_TRIANGLE, push_triangle=push_tri)
 
     # -- the step's parts
+
+    def _body_sweep(self, pose_prev, pose_next, dt, state, end):
+        """Sweep the body's motion against the player moving from :attr:`position` to ``end``:
+        (position at ``pose_next``, the triangle first met or -1 when the body did not push it)."""
+        start = self.position
+        # what it rests on or holds at the start is carried, not swept: its anchors and contacts
+        resting = self._resting
+        if resting is None:
+            t0 = self._touch(pose_prev, start).triangle
+            resting = t0[t0 >= 0]
+        ignore = resting if self._anchors is None else np.concatenate([resting, self._anchors.triangles])
+        skip = None
+        if len(ignore):
+            skip = np.zeros(len(self.collider.triangles), dtype=np.bool_)
+            skip[ignore] = True
+        else:
+            ignore = None
+        motion = BodyMotion(pose_prev, pose_next)
+        hit = sweep_sphere(pose_prev, pose_next, start, end, self.radius - 2.0 * self.tolerance, ignore=ignore,
+                           motion=motion)
+        self._queries += 1
+        if hit is None:
+            return end, NO_TRIANGLE
+        fr = motion.fractions
+        push = np.zeros(3)
+        last = motion.segments - 1
+        # triangles a push of up to a radius could bring near are counted in the sub-step count
+        reach_r = self._feel + 2.0 * self.radius
+        for i in range(hit.segment, motion.segments):
+            f0 = hit.time if i == hit.segment else fr[i]
+            f1 = fr[i + 1]
+            span = f1 - fr[i]
+            if span <= 0:
+                continue
+            reach = segment_reach(motion, i, start, end, reach_r)
+            n = max(1, math.ceil(reach * (f1 - f0) / span / self.substep - 1e-9))
+            for j in range(1, n + 1):
+                f = f0 + (f1 - f0) * j / n
+                if j == n:
+                    pose = pose_next if i == last else motion.poses[i + 1]
+                else:
+                    if self._scratch is None:
+                        self._scratch = motion.pose_at(f)
+                    pose = motion.pose_at(f, out=self._scratch)
+                target = start + f * (end - start) + push
+                touch = self._touch(pose, target, skip)
+                if touch.summary[3] > self.tolerance:
+                    new, touch = self._settle(pose, target, touch, skip)
+                    push += new - target
+        if not float(push @ push) > self.tolerance * self.tolerance:
+            return end + push, NO_TRIANGLE
+        if state == FALLING:  # inherit the surface's velocity along the contact normal
+            n = hit.normal if float(hit.normal @ (hit.centre - hit.point)) >= 0 else -hit.normal
+            k = float((self.velocity - hit.velocity / dt) @ n)
+            if k < 0:
+                self.velocity = self.velocity - k * n
+        return end + push, hit.triangle
 
     def _along(self, it, speed):
         if not (it.moving and speed > 0):
@@ -441,11 +533,15 @@ class CharacterController:
         self.normal = self.up.copy()
         return FALLING
 
-    def _touch(self, pose, pos) -> _Touch:
-        """Contacts within radius + skin of ``pos``, the terrain plane included."""
+    def _touch(self, pose, pos, skip=None) -> _Touch:
+        """Contacts within radius + skin of ``pos``, the terrain plane included (less the
+        triangles ``skip`` (F,) bool marks, when given)."""
         cs = pose.sphere_contacts(pos, self._feel)
         self._queries += 1
         tri, pt, nrm, dep, bar = cs.triangle, cs.point, cs.normal, cs.depth, cs.barycentric
+        if skip is not None and len(tri):
+            keep = ~skip[tri]
+            tri, pt, nrm, dep, bar = tri[keep], pt[keep], nrm[keep], dep[keep], bar[keep]
         on_floor = False
         if self.floor is not None:
             h = float(pos @ self.up) - self.floor
@@ -461,7 +557,7 @@ class CharacterController:
         _summarize(nrm, dep, self.skin, self.tolerance, self.up, self._cos_slope, self.radius, ground, out)
         return _Touch(tri, pt, nrm, bar, ground, out, on_floor)
 
-    def _settle(self, pose, pos, touch):
+    def _settle(self, pose, pos, touch, skip=None):
         """Resolve ``touch`` at ``pos``: at most ``max_iterations`` pushes, re-querying after each."""
         for _ in range(self.max_iterations):
             if not touch.summary[3] > self.tolerance:
@@ -470,7 +566,7 @@ class CharacterController:
             if not push.any():  # opposed contacts: nothing clears them (thesis figure 16)
                 break
             pos = pos + push
-            touch = self._touch(pose, pos)
+            touch = self._touch(pose, pos, skip)
         return pos, touch
 
     def _sweep(self, pose, pos, disp, state):
@@ -641,6 +737,15 @@ class CharacterController:
             return np.zeros(3)
         then = pose_prev.track(touch.triangle[body], touch.barycentric[body])
         return (touch.point[body] - then).sum(0) / (dt * len(touch.triangle))
+
+
+def _moves(a, b):
+    """Whether the body can move from pose ``a`` to pose ``b`` (not one pose, not one clip time)."""
+    if a is b:
+        return False
+    if a.clip is not None and a.clip == b.clip and a.time == b.time:
+        return False
+    return True
 
 
 def _pose_key(pose):

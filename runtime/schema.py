@@ -81,6 +81,28 @@ def skinning_method(prim) -> str:
 #: Prim names under the SkelRoot.
 SKELETON_NAME = "Skeleton"
 COLLIDER_NAME = "Collider"
+#: The ``Scope`` under the SkelRoot holding one guide-purpose ``UsdGeom.Sphere`` per part (in part
+#: order; each rigidly bound to its part's joint, :func:`guide_bind_transform`): what every UsdSkel
+#: consumer shows of the parts.  The ``colossus:parts:*`` attributes stay the truth.
+GUIDES_NAME = "PartSpheres"
+#: A guide sphere's customData key holding its part index.
+GUIDE_PART_KEY = "colossus:part"
+#: The variant set on the SkelRoot whose variants each bind one clip as the Skeleton's
+#: ``skel:animationSource`` (variant name = the clip's prim name; the first clip is the default).
+CLIP_VARIANT_SET = "clip"
+
+
+def guide_bind_transform(bind, center) -> np.ndarray:
+    """(4, 4) column-vector ``geomBindTransform`` of a part's guide sphere: ``bind @ T(center)``
+    for its joint's bind transform ``bind`` (4, 4) and the part's joint-space ``center`` (3,).
+
+    UsdSkel skins a rigidly bound prim by ``S_j(t) @ inv(bind_j) @ geomBind`` (column-vector), so
+    the sphere's origin lands on ``S_j(t) @ center`` and its unit radius is scaled by ``S_j(t)``:
+    the contract's part sphere at every time."""
+    m = np.asarray(bind, dtype=np.float64).copy()
+    c = np.asarray(center, dtype=np.float64).reshape(3)
+    m[:3, 3] = m[:3, :3] @ c + m[:3, 3]
+    return m
 
 
 # ------------------------------------------------------------------------------ matrices

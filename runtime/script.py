@@ -103,7 +103,7 @@ class Run:
     times (N,) float64 time codes of the pose each step ended on, seconds (N,) since the start,
     states (N,) str, positions (N, 3) float64, triangles (N,) int64 deepest contact's triangle
     (-1 none or the terrain), penetration (N,) and slip (N,) stage units, energy (N,),
-    on_floor (N,) bool."""
+    on_floor (N,) bool, pushed (N,) bool: the moving body pushed the player that step."""
 
     clip: str
     radius: float
@@ -118,6 +118,11 @@ class Run:
     energy: np.ndarray
     on_floor: np.ndarray
     floor: float | None = None
+    pushed: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.pushed is None:
+            self.pushed = np.zeros(len(self.times), dtype=bool)
 
     @property
     def grounded(self) -> np.ndarray:
@@ -369,7 +374,7 @@ def run_script(col: Collider, script: Script, clip: str | None = None,
     rec = dict(times=np.empty(n), seconds=np.empty(n), states=np.empty(n, dtype=object),
                positions=np.empty((n, 3)), triangles=np.empty(n, dtype=np.int64),
                penetration=np.empty(n), slip=np.empty(n), energy=np.empty(n),
-               on_floor=np.empty(n, dtype=bool))
+               on_floor=np.empty(n, dtype=bool), pushed=np.empty(n, dtype=bool))
     a = col.pose(clip, clip_time(0))
     b = col.pose(clip, clip_time(0))
     for k, intent in enumerate(script.intents):
@@ -384,6 +389,7 @@ def run_script(col: Collider, script: Script, clip: str | None = None,
         rec["slip"][k] = s.slip
         rec["energy"][k] = s.energy
         rec["on_floor"][k] = s.on_floor
+        rec["pushed"][k] = s.pushed
         a, b = b, a
     rec["states"] = rec["states"].astype(str)
     return Run(clip=clip, radius=r, rate=script.rate, floor=floor, **rec)

@@ -65,12 +65,23 @@ def _bad_values(attr: str, vals: np.ndarray) -> np.ndarray:
     return bad
 
 
-def open_stage(path: str) -> Usd.Stage:
-    """Open ``path`` fresh (reloading a layer usd-core already holds), raising on failure."""
+def open_layer(path: str) -> Sdf.Layer:
+    """The root layer of ``path``, read fresh (a layer usd-core already holds is reloaded), raising
+    on failure.  Holding it while the references are listed and the stage is opened
+    (:func:`open_stage`) makes the file parsed once, not once per step."""
     layer = Sdf.Layer.Find(path)
     if layer is not None:
         layer.Reload(force=True)
-    stage = Usd.Stage.Open(path, Usd.Stage.LoadAll)
+    else:
+        layer = Sdf.Layer.FindOrOpen(path)
+    if layer is None:
+        raise RuntimeError(f"usd-core could not open {path}")
+    return layer
+
+
+def open_stage(path: str, layer: Sdf.Layer | None = None) -> Usd.Stage:
+    """Open ``path`` fresh (on ``layer`` from :func:`open_layer` when given), raising on failure."""
+    stage = Usd.Stage.Open(layer if layer is not None else open_layer(path), Usd.Stage.LoadAll)
     if stage is None:
         raise RuntimeError(f"usd-core could not open {path}")
     return stage

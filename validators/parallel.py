@@ -85,12 +85,16 @@ def _probe_read(path):
     :func:`check_asset` when the asset cannot be opened or read (so it is not read twice)."""
     from colossus.pipeline.errors import one_line
 
-    from .asset import CLIP_ATTRS, LoadedAsset, open_stage
+    from .asset import CLIP_ATTRS, LoadedAsset, open_layer, open_stage
     from .runner import external_references
+    try:  # parsed once: held while its references are listed and the stage is opened on it
+        layer = open_layer(path)
+    except Exception:
+        layer = None
     if external_references(path):
         return None  # check_asset reports COL004 without opening the stage
     try:
-        stage = open_stage(path)
+        stage = open_stage(path, layer)
     except Exception as e:
         return OPEN_FAILED.format(one_line(e))
     try:

@@ -12,7 +12,7 @@ from pxr import Tf, Usd
 from colossus.pipeline.errors import one_line
 
 from . import tolerances as tol
-from .asset import LoadedAsset, open_stage
+from .asset import LoadedAsset, open_layer, open_stage
 from .findings import SEVERITIES, AssetReport, Finding
 from .registry import RuleSelector, get_rule
 
@@ -139,6 +139,10 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
             add("COL003", f"{path} does not exist or is not a readable file")
             report.sort()
             return report
+        try:  # parsed once: held while its references are listed and the stage is opened on it
+            layer = open_layer(path)
+        except Exception:
+            layer = None  # opening the stage below reports why (COL001)
         refs = external_references(path)
         if refs:  # read from the layer alone: nothing it names is opened
             shown = ", ".join(repr(r) for r in refs[:5]) + (f" (+{len(refs) - 5} more)" if len(refs) > 5 else "")
@@ -146,7 +150,7 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
             report.sort()
             return report
         try:
-            stage = open_stage(path)
+            stage = open_stage(path, layer)
         except Exception as e:  # usd-core raises Tf.ErrorException and friends
             add("COL001", OPEN_FAILED.format(one_line(e)))
             report.sort()

@@ -76,7 +76,9 @@ def summarize(asset: LoadedAsset) -> dict:
     ``worstDirection``; None for a full mesh) and ``not_carried`` (what the importer met in the
     source and did not carry exactly: ``[{"what", "where", "detail", "bound_relative"}]``, from
     the provenance's ``notCarried``; empty when nothing) and ``skinning_method`` (the mesh's
-    ``primvars:skel:skinningMethod``, ``classicLinear`` when not authored).
+    ``primvars:skel:skinningMethod``, ``classicLinear`` when not authored) and ``usd_tools``
+    (what other USD tools are given: ``clip_variants`` the ``clip`` variant names, ``selection``,
+    ``guide_spheres`` their count).
     """
     stage = asset.stage
     tcps = float(stage.GetTimeCodesPerSecond())
@@ -143,6 +145,7 @@ def summarize(asset: LoadedAsset) -> dict:
     out["provenance"] = prov
     out["model_size"] = float(asset.model_size) if asset.points is not None else None
     out["skinning_method"] = schema.skinning_method(asset.mesh) if asset.mesh is not None else None
+    out["usd_tools"] = _usd_tools(asset)
     out["proxy"] = None
     if asset.mesh is not None and isinstance(asset.mesh.GetCustomDataByKey(schema.PROXY_KEY), dict):
         g = asset.mesh.GetCustomDataByKey
@@ -156,6 +159,22 @@ def summarize(asset: LoadedAsset) -> dict:
     from colossus.pipeline import notcarried
     out["not_carried"] = notcarried.from_provenance(prov.get(notcarried.PROVENANCE_KEY))
     return out
+
+
+def _usd_tools(asset) -> dict:
+    """What other USD tools are given: the SkelRoot's ``clip`` variant names (sorted, as USD
+    lists them) and selection, and the guide spheres (``UsdGeom.Sphere`` prims under the SkelRoot)."""
+    from pxr import Usd
+
+    if asset.root is None:
+        return {"clip_variants": [], "selection": None, "guide_spheres": 0}
+    vsets = asset.root.GetVariantSets()
+    has = vsets.HasVariantSet(schema.CLIP_VARIANT_SET)
+    vset = vsets.GetVariantSet(schema.CLIP_VARIANT_SET) if has else None
+    spheres = [p for p in Usd.PrimRange(asset.root) if p.IsA(UsdGeom.Sphere)]
+    return {"clip_variants": list(vset.GetVariantNames()) if has else [],
+            "selection": (vset.GetVariantSelection() or None) if has else None,
+            "guide_spheres": len(spheres)}
 
 
 def _fmt(v, spec="g"):
@@ -177,6 +196,10 @@ def format_summary(s: dict) -> str:
     lines.append(f"  counts    {_fmt(c['vertices'])} vertices, {_fmt(c['triangles'])} triangles, "
                  f"{_fmt(c['joints'])} joints, {_fmt(c['parts'])} parts, {c['clips']} clips "
                  f"({c['frames']} frames), influences {itext}")
+    u = s.get("usd_tools")
+    if u is not None:
+        lines.append(f"  usd tools variant set {schema.CLIP_VARIANT_SET!r}: {len(u['clip_variants'])} clips "
+                     f"(selected {u['selection'] or '-'}), {u['guide_spheres']} guide part spheres")
     if s.get("skinning_method"):
         lines.append(f"  skinning  {s['skinning_method']}"
                      + ("" if s["skinning_method"] in schema.SKINNING_METHODS else " (not a method the runtime poses)"))

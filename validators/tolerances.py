@@ -39,3 +39,7 @@ CHUNK_FRAMES = 256
 SOURCE_MOTION_RELATIVE = 1e-4
 #: ``--source``: an asset vertex and a source vertex closer than this at the bind pose are the same.
 SOURCE_MATCH_RELATIVE = 1e-5
+#: A part's guide sphere (COL408) agrees with ``colossus:parts:*`` when, skinned by UsdSkel, its
+#: centre lands within this x model size of the part's centre and its radius within this
+#: fraction of the part's radius (the float32 values are written as they are stored).
+GUIDE_RELATIVE = 1e-6

@@ -21,7 +21,7 @@ ASSIMP_EXTENSIONS = (
     ".bvh", ".md5mesh", ".md5anim", ".smd", ".vta", ".ms3d", ".b3d", ".x3d", ".3mf", ".lwo",
     ".lws", ".ase", ".ask", ".ac", ".ac3d", ".acc", ".cob", ".scn", ".mdl", ".md2", ".md3",
     ".mdc", ".nff", ".off", ".ogex", ".irr", ".irrmesh", ".q3o", ".q3s", ".raw", ".ter",
-    ".hmp", ".ndo", ".pmx", ".xgl", ".zgl", ".csm", ".iqm", ".sib", ".m3d", ".mesh.xml",
+    ".hmp", ".ndo", ".pmx", ".xgl", ".zgl", ".csm", ".iqm", ".sib", ".m3d", ".mesh.xml", ".mesh",
     ".amf", ".3d", ".uc", ".dxf", ".ifc", ".stp", ".lxo",
 )
 USD_EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz")
@@ -51,6 +51,9 @@ def reader_for(path):
     for ext in sorted(READERS, key=len, reverse=True):
         if name.endswith(ext):
             return READERS[ext]
+    if name.endswith((".skeleton", ".skeleton.xml")):
+        raise InputError(path, "an Ogre skeleton holds no mesh: import the .mesh (or .mesh.xml) that links it; "
+                               "its skeleton is read from beside it")
     raise InputError(path, f"unsupported file type {os.path.splitext(name)[1] or '(no extension)'!r}; "
                      f"supported: {' '.join(USD_EXTENSIONS)} through usd-core, and {len(ASSIMP_EXTENSIONS)} "
                      f"through assimp ({' '.join(ASSIMP_EXTENSIONS[:4])} ... {ASSIMP_EXTENSIONS[-1]})")

@@ -28,12 +28,18 @@ import numpy as np
 from ..errors import InputError
 from .common import AllocationBudget, check_finite, check_input_file
 from .fbx_header import read_anim_stacks, read_global_settings, read_inherit_types, read_morph_geometry
-from . import fbx_checks, fbx_doc
+from . import fbx_checks, fbx_doc, ogre
 from .collada_xml import read_clips, read_skins
 from .scene import Animation, Channel, Scene, SceneMesh, Skin
 from .scene.build import build
 
 FBX_HELPER = "_$AssimpFbx$_"
+
+
+def _extension(path) -> str:
+    """The file's extension as the reader table keys it (``.mesh.xml`` whole)."""
+    low = os.path.basename(os.fspath(path)).lower()
+    return ".mesh.xml" if low.endswith(".mesh.xml") else os.path.splitext(low)[1]
 
 
 def assimp_flags():
@@ -90,11 +96,11 @@ def _fbx_rate(fbx) -> float | None:
     return custom if custom > 0 else None
 
 
-def read_scene(path, budget, fbx) -> Scene:
+def read_scene(path, budget, fbx, doc=None) -> Scene:
     """Read any file assimp imports into a :class:`Scene`."""
     import assimp_py
 
-    ext = os.path.splitext(path)[1].lower()
+    ext = _extension(path)
     try:
         scene = assimp_py.import_file(path, assimp_flags())
     except Exception as exc:  # assimp reports every parse failure as a generic exception
@@ -126,7 +132,7 @@ def read_scene(path, budget, fbx) -> Scene:
         for mi in mlist:
             mesh_node.setdefault(mi, ni)
 
-    morph = read_morph_geometry(path) if ext == ".fbx" else {}
+    morph = read_morph_geometry(doc) if ext == ".fbx" else {}
     collada = read_skins(path) if ext == ".dae" else {}
     mended = []
     meshes = []
@@ -177,9 +183,10 @@ def read_scene(path, budget, fbx) -> Scene:
                                 skin=skin, morph_targets=morph.get(m.name, 0) or morph.get(names[node] if node >= 0 else "", 0)))
 
     hint = _fbx_rate(fbx) if ext == ".fbx" else None
-    stacks = read_anim_stacks(path) if ext == ".fbx" else {}
+    stacks = read_anim_stacks(doc) if ext == ".fbx" else {}
     dae_clips = read_clips(path) if ext == ".dae" else []
     anims = []
+    is_ogre = ogre.is_ogre(path)  # Ogre plays rotations by nlerp (RIM_LINEAR), assimp's keys are its own
     for ai, a in enumerate(scene.animations):
         tps = float(a.ticks_per_second or 0.0) or hint or 25.0
         span = stacks.get(a.name)
@@ -209,19 +216,25 @@ def read_scene(path, budget, fbx) -> Scene:
                     if np.any(nrm < 1e-12):
                         raise InputError(path, f"animation {a.name!r}, node {ch.node_name!r}: a zero rotation quaternion")
                     v = v / nrm[:, None]
-                chans.append(Channel(node, path_, t / tps + shift, v, "LINEAR"))
+                chans.append(Channel(node, path_, t / tps + shift, v, "NLERP" if is_ogre else "LINEAR"))
         name = a.name
+        if is_ogre and float(a.duration or 0.0) > 0.0:  # Ogre plays a track's gap to the length as a wrap
+            length = float(a.duration) / tps
+            chans = ogre.wrap_to_length(chans, length)
+            span = (0.0, length)
         if dae_clips and len(dae_clips) == len(scene.animations) and a.name == f"combinedAnim_{ai}":
             # assimp's name for the i-th <animation_clip>: the file's name and window instead
             name, lo, hi = dae_clips[ai]
             if np.isfinite(hi) and hi >= lo:
                 span = (lo, hi)
         anims.append(Animation(name, chans, span))
+    if is_ogre:  # Ogre adds a key's translation in the parent's space; assimp does not
+        ogre.mend_translations(nlocal, [a.channels for a in anims])
     helpers = {i for i, n in enumerate(names) if FBX_HELPER in n}
     if mended:
         notes.append(f"assimp's skin weights of {', '.join(mended)} did not follow the file's <vertex_weights> "
                      "(a known assimp error on Collada <polygons>): the file's own weights were used")
-    rrs = _segment_scale_nodes(names, nparents, read_inherit_types(path)) if ext == ".fbx" else {}
+    rrs = _segment_scale_nodes(names, nparents, read_inherit_types(doc)) if ext == ".fbx" else {}
     return Scene(names=[n.split(FBX_HELPER)[0] for n in names], parents=nparents, local=nlocal, meshes=meshes,
                  notes=notes,
                  animations=anims, helpers=helpers, fps_hint=hint, unweighted_follow_node=True,
@@ -301,31 +314,23 @@ def read_assimp(path, meshes=None, fps=None):
     path = os.fspath(path)
     size = check_input_file(path)
     budget = AllocationBudget(path, size)
-    ext = os.path.splitext(path)[1].lower()
+    ext = _extension(path)
     if ext == ".fbx":
         why = fbx_checks.refusal(fbx_doc.file_version(path))
         if why:
             raise InputError(path, why)
-    fbx = read_global_settings(path) if ext == ".fbx" else {}
-    scene = read_scene(path, budget, fbx)
+    doc = fbx_doc.read_document(path) if ext == ".fbx" else None  # one parse for every FBX read here
+    fbx = read_global_settings(doc) if ext == ".fbx" else {}
+    skeleton = None
+    if ogre.is_ogre(path):  # the skeleton it names: inside its folder, and present (assimp drops a missing one)
+        skeleton = ogre.check_skeleton(path)
+    scene = read_scene(path, budget, fbx, doc)
     up, mpu, note = _source_frame(path, ext, fbx)
     mesh = build(scene, path, meshes=meshes, fps=fps, budget=budget,
                  source={"file": os.path.basename(path), "format": ext.lstrip("."), "reader": "assimp",
                          "frame": note})
     if ext == ".fbx":  # what the file says about deforming that assimp does not carry (fail closed)
-        doc = fbx_doc.read_document(path)
-        items = fbx_checks.check(doc, mesh, scene)
-        if mesh.source.get("morph_meshes") and doc is not None:
-            try:
-                m_item, inert = fbx_checks.morph(doc, mesh)
-            except fbx_checks.MALFORMED as e:  # fail closed: the shapes are said not carried
-                m_item, inert = fbx_checks.unchecked("the blend shapes", e), []
-            mesh.source["morph_meshes"] = {}  # judged here: live channels only
-            if m_item is not None:
-                items.insert(0, m_item)
-            if inert:
-                mesh.source["notes"] = mesh.source.get("notes", []) + [
-                    f"blend shapes of {', '.join(inert)} have DeformPercent 0 at rest and in every curve: "
-                    "nothing of them to carry"]
-        mesh.source["not_carried"] = items
+        mesh.source["not_carried"] = fbx_checks.morph_records(doc, mesh) + fbx_checks.check(doc, mesh, scene)
+    if ogre.is_ogre(path):  # pose / morph animation, animation links: named, never dropped silently
+        mesh.source["not_carried"] = ogre.not_carried(path, skeleton)
     return mesh.replace(up_axis=up, meters_per_unit=mpu)

@@ -251,6 +251,25 @@ class _Context:
         return np.concatenate(rows) if rows else np.arange(self.mesh.vertex_count)
 
 
+def morph_records(doc: Document | None, mesh: SkinnedMesh) -> list:
+    """The blend-shape record of a read FBX mesh (both roads): ``[]`` or one ``morph_targets``
+    record for the live channels (:func:`morph`; an ``fbx_unchecked`` one when the file cannot be
+    judged); channels inert everywhere become a note.  Resets ``mesh.source["morph_meshes"]``
+    (judged here: live channels only)."""
+    if not mesh.source.get("morph_meshes") or doc is None:
+        return []
+    try:
+        item, inert = morph(doc, mesh)
+    except MALFORMED as e:  # fail closed: the shapes are said not carried
+        item, inert = unchecked("the blend shapes", e), []
+    mesh.source["morph_meshes"] = {}
+    if inert:
+        mesh.source["notes"] = mesh.source.get("notes", []) + [
+            f"blend shapes of {', '.join(inert)} have DeformPercent 0 at rest and in every curve: "
+            "nothing of them to carry"]
+    return [] if item is None else [item]
+
+
 def morph(doc: Document | None, mesh: SkinnedMesh):
     """``(record or None, inert)``: the ``morph_targets`` record of the chosen meshes' blend shape
     channels that can move a vertex (``DeformPercent`` not 0 at rest or in a curve), bound by the

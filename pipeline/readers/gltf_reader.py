@@ -44,7 +44,8 @@ _PATHS = {"translation": "t", "rotation": "r", "scale": "s"}
 #: touch the collider; quantized attributes are plain normalized / integer accessors).
 _SUPPORTED_REQUIRED = {"KHR_materials_unlit", "KHR_texture_transform", "KHR_materials_pbrSpecularGlossiness",
                        "KHR_texture_basisu", "EXT_texture_webp", "KHR_materials_emissive_strength",
-                       "KHR_mesh_quantization", "EXT_texture_avif", "MSFT_texture_dds"}
+                       "KHR_mesh_quantization", "EXT_texture_avif", "MSFT_texture_dds",
+                       "KHR_animation_pointer"}  # node TRS read; what else can move the body is named
 #: Extensions used (not required) that leave the collider exactly as read: materials, textures,
 #: lights, metadata, and compressions whose uncompressed fallback the file also holds (a file
 #: that needs them requires them, and is refused).
@@ -56,8 +57,8 @@ _HARMLESS_PREFIXES = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "MSFT_te
                       "EXT_lights_")
 #: What the extensions we name do to a collider that does not read them.
 _EXTENSION_EFFECT = {
-    "KHR_animation_pointer": "animation channels that target node transforms or morph weights through JSON "
-                             "pointers are not read",
+    "KHR_animation_pointer": "animation channels that point at morph weights or other node properties "
+                             "than translation / rotation / scale are not read",
     "EXT_mesh_gpu_instancing": "mesh instances placed by per-instance transforms are not read",
     "VRMC_springBone": "spring-bone secondary motion (simulated at run time) is not carried",
     "VRMC_node_constraint": "node constraints (aim / roll / rotation) are not carried",
@@ -72,9 +73,14 @@ def extension_items(j: dict) -> list:
     its geometry or deformation and that this reader does not read (one record per extension;
     ``KHR_animation_pointer`` only when a channel points at node transforms or morph weights)."""
     used = [e for e in (j.get("extensionsUsed") or []) if isinstance(e, str)]
+    if "KHR_animation_pointer" not in used and any(  # pointer channels in a file that does not list it
+            isinstance(ch, dict) and isinstance(ch.get("target"), dict) and ch["target"].get("path") == "pointer"
+            for a in j.get("animations") or [] if isinstance(a, dict) for ch in a.get("channels") or []):
+        used.append("KHR_animation_pointer")
     out = []
     for e in used:
-        if e in _HARMLESS_USED or e in _SUPPORTED_REQUIRED or e.startswith(_HARMLESS_PREFIXES):
+        if e != "KHR_animation_pointer" and (e in _HARMLESS_USED or e in _SUPPORTED_REQUIRED
+                                             or e.startswith(_HARMLESS_PREFIXES)):
             continue
         if e == "KHR_animation_pointer":
             ptrs = []
@@ -82,11 +88,8 @@ def extension_items(j: dict) -> list:
                 for ch in (a.get("channels") or []) if isinstance(a, dict) else []:
                     tgt = ch.get("target") or {} if isinstance(ch, dict) else {}
                     ptr = ((tgt.get("extensions") or {}).get(e) or {}).get("pointer") if isinstance(tgt, dict) else None
-                    if isinstance(ptr, str) and (ptr.startswith("/nodes/") or
-                                                 (ptr.startswith("/meshes/") and ptr.endswith("/weights"))):
-                        if ptr.startswith("/meshes/") or ptr.rsplit("/", 1)[-1] in (
-                                "translation", "rotation", "scale", "matrix", "weights"):
-                            ptrs.append(ptr)
+                    if isinstance(ptr, str) and pointer_target(ptr)[0] == "moves":
+                        ptrs.append(ptr)
             if not ptrs:
                 continue
             detail = (f"{_EXTENSION_EFFECT[e]}: {len(ptrs)} channel(s), e.g. {', '.join(ptrs[:3])}; the collider "
@@ -96,6 +99,28 @@ def extension_items(j: dict) -> list:
                                               "the geometry or the deformation")
         out.append(notcarried.item("gltf_extension", [e], detail, None))
     return out
+
+
+def pointer_target(ptr: str):
+    """What a ``KHR_animation_pointer`` JSON pointer (RFC 6901) animates, for the collider:
+
+    * ``("node", i, path)`` for ``/nodes/{i}/translation|rotation|scale``: read as a plain channel
+      on node ``i`` (``i`` still to be range-checked), with its sampler's interpolation;
+    * ``("moves", None, None)`` for what can move the body and is not carried: a node's morph
+      ``weights`` (morph weights are read from plain channels only), ``/meshes/{i}/weights``, any other node
+      property (``matrix``, a node extension such as ``KHR_node_visibility``);
+    * ``("harmless", None, None)`` for the rest (materials, cameras, lights, textures, ...).
+
+    https://github.com/KhronosGroup/glTF/tree/main/extensions/2.0/Khronos/KHR_animation_pointer
+    """
+    parts = [p.replace("~1", "/").replace("~0", "~") for p in ptr.split("/")[1:]] if ptr.startswith("/") else []
+    if len(parts) >= 2 and parts[0] == "nodes":
+        if len(parts) == 3 and parts[2] in _PATHS and parts[1].isdigit():
+            return "node", int(parts[1]), _PATHS[parts[2]]
+        return "moves", None, None
+    if len(parts) == 3 and parts[0] == "meshes" and parts[2] == "weights":
+        return "moves", None, None
+    return "harmless", None, None
 
 
 def morph_item(j: dict, g, chosen: list, size: float):
@@ -459,10 +484,22 @@ def _read_scene(path, budget: AllocationBudget):
         weights = _weight_channels(g, a, ai, samplers, nodes, node_meshes, meshes, path)
         for ci, ch in enumerate(a.get("channels") or []):
             tgt = ch.get("target") or {}
-            p = _PATHS.get(tgt.get("path"))
-            if p is None or "node" not in tgt:
-                continue  # morph weights / extension paths: not part of the skeleton's motion
-            node = tgt["node"]
+            if tgt.get("path") == "pointer":  # KHR_animation_pointer: node TRS pointers are plain channels
+                ptr = ((tgt.get("extensions") or {}).get("KHR_animation_pointer") or {}).get("pointer")
+                if not isinstance(ptr, str):
+                    raise InputError(path, f"animation {ai} channel {ci}: a pointer channel without a "
+                                           "KHR_animation_pointer pointer")
+                kind, node, p = pointer_target(ptr)
+                if kind != "node":
+                    continue  # named in the summary when it can move the body (extension_items)
+                if not 0 <= node < k:
+                    raise InputError(path, f"animation {ai} channel {ci}: pointer {ptr!r} names node {node}, "
+                                           f"out of range")
+            else:
+                p = _PATHS.get(tgt.get("path"))
+                if p is None or "node" not in tgt:
+                    continue  # morph weights / extension paths: not part of the skeleton's motion
+                node = tgt["node"]
             if not isinstance(node, int) or not 0 <= node < k:
                 raise InputError(path, f"animation {ai} channel {ci}: node {node!r} out of range")
             si = ch.get("sampler")

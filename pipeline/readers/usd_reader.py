@@ -177,8 +177,10 @@ def _read_usd(path, meshes=None, fps=None):
         if not any(p.IsA(UsdGeom.Mesh) for p in stage.Traverse()):
             raise InputError(path, "the stage has no mesh")
         raise InputError(path, "no skinned mesh: no Mesh is bound to a Skeleton with joint influences inside a SkelRoot (a mesh with no skin cannot be animated)")
+    # guide-purpose gprims (a colossus asset's part spheres) are not the body: not even noted
     gprims = sorted({str(q.GetPrim().GetPath()) for b in bindings for q in b.GetSkinningTargets()
-                     if not q.GetPrim().IsA(UsdGeom.Mesh) and q.GetPrim().IsA(UsdGeom.Gprim)})
+                     if not q.GetPrim().IsA(UsdGeom.Mesh) and q.GetPrim().IsA(UsdGeom.Gprim)
+                     and UsdGeom.Imageable(q.GetPrim()).ComputePurpose() != UsdGeom.Tokens.guide})
 
     # ---- skeletons as nodes: one node per Skeleton prim, its joints below it ------------------
     skels, skel_of = [], {}

@@ -3,14 +3,20 @@
 Layout (``<Name>`` is the source file's stem made a valid identifier)::
 
     /<Name>                 SkelRoot (defaultPrim)
-    /<Name>/Skeleton        Skeleton: joints, bindTransforms, restTransforms,
-                            skel:animationSource -> the first clip
+    /<Name>                 variant set "clip": variant <clip> binds /<Name>/<clip> as the
+                            Skeleton's skel:animationSource (default selection: the first clip)
+    /<Name>/Skeleton        Skeleton: joints, bindTransforms, restTransforms (its
+                            skel:animationSource is authored in the "clip" variants only)
     /<Name>/Collider        Mesh: triangles, rightHanded, UsdSkelBindingAPI (jointIndices /
                             jointWeights, elementSize = max influences; skinningMethod
                             "dualQuaternion" where the source skins so), PhysicsCollisionAPI,
                             PhysicsMeshCollisionAPI (approximation "none"), colossus:parts:*,
                             customData["colossus"] = provenance
     /<Name>/<clip>          SkelAnimation per clip, one time sample per source frame
+    /<Name>/PartSpheres     Scope (purpose guide): per part p a Sphere ``p<p>_<joint>``, purpose
+                            guide, radius = the part's, rigidly bound to the part's joint
+                            (constant jointIndices / jointWeights of one, geomBindTransform =
+                            bind_j @ T(centre), the same as its xform), customData colossus:part = p
 
 The file is written to a temporary name in the output directory, re-opened with usd-core and
 checked (:func:`_check_written`), then handed to the caller's ``check`` (the command line runs the
@@ -34,7 +40,7 @@ from ..model import SkinnedMesh
 from . import StageReport
 
 OUTPUT_EXTENSIONS = (".usda", ".usdc", ".usd")
-RESERVED = (schema.SKELETON_NAME, schema.COLLIDER_NAME)
+RESERVED = (schema.SKELETON_NAME, schema.COLLIDER_NAME, schema.GUIDES_NAME)
 
 
 def _ident(name: str, taken: set) -> str:
@@ -164,8 +170,7 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None, check=Non
                 sa.Set(Vt.Vec3hArray.FromNumpy(np.ascontiguousarray(s[f], dtype=np.float16)), tc)
             _write_shape_weights(anim, clip, stored, shape_names)
             clip_paths.append(anim.GetPath())
-        if clip_paths:
-            UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([clip_paths[0]])
+        _clip_variants(stage, root, skel, clip_paths)
 
         # -- collision mesh ------------------------------------------------------------------
         geo = UsdGeom.Mesh.Define(stage, root_path.AppendChild(schema.COLLIDER_NAME))
@@ -195,6 +200,7 @@ def write(mesh: SkinnedMesh, out_path, provenance: dict | None = None, check=Non
         prim = geo.GetPrim()
         schema.write_parts(prim, [jpaths[j] for j in parts.joints], parts.centers, parts.radii,
                            parts.face_offsets, parts.faces)
+        _guide_spheres(stage, root_path, skel, mesh)
         if provenance:
             prim.SetCustomDataByKey(schema.PROVENANCE_KEY, _plain(provenance))
         stage.GetRootLayer().documentation = f"Collider asset written by colossus from {mesh.source.get('file', '?')}"
@@ -270,6 +276,61 @@ def _write_shape_weights(anim, clip, stored, names) -> None:
     attr = anim.CreateBlendShapeWeightsAttr()
     for f, code in enumerate(clip.times):
         attr.Set(Vt.FloatArray.FromNumpy(np.ascontiguousarray(w[f], dtype=np.float32)), Usd.TimeCode(float(code)))
+
+
+def _clip_variants(stage, root, skel, clip_paths) -> None:
+    """The SkelRoot's variant set ``clip``: one variant per clip (named as its prim), binding it
+    as the Skeleton's ``skel:animationSource``; the first clip is the default selection.  The
+    relationship lives in the variants only (a local opinion would be stronger than any variant),
+    so every USD tool reaches every clip by switching the variant; the ``SkelAnimation`` prims
+    themselves stay plain children of the SkelRoot, which our readers list directly."""
+    from pxr import UsdSkel
+
+    if not clip_paths:
+        return
+    UsdSkel.BindingAPI.Apply(skel.GetPrim())
+    vset = root.GetPrim().GetVariantSets().AddVariantSet(schema.CLIP_VARIANT_SET)
+    for path in clip_paths:
+        vset.AddVariant(path.name)
+        vset.SetVariantSelection(path.name)
+        with vset.GetVariantEditContext():
+            UsdSkel.BindingAPI(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([path])
+    vset.SetVariantSelection(clip_paths[0].name)
+
+
+def _guide_spheres(stage, root_path, skel, mesh: SkinnedMesh) -> None:
+    """Per part a guide-purpose ``UsdGeom.Sphere`` under ``<root>/PartSpheres``, rigidly bound to
+    the part's joint (UsdSkel's constant-interpolation joint binding, one influence of weight 1)
+    so that every UsdSkel consumer moves it with the body: ``geomBindTransform`` (and the
+    sphere's own transform, what a viewer that does not skin shows) is ``bind_j @ T(centre)``
+    (:func:`runtime.schema.guide_bind_transform`) with the centre and radius exactly as stored
+    in ``colossus:parts:*`` (float32), which stay the truth (the validator's COL408 checks the two
+    agree)."""
+    from pxr import Gf, UsdGeom, UsdSkel, Vt
+
+    parts = mesh.parts
+    if parts is None or len(parts) == 0:
+        return
+    scope = UsdGeom.Scope.Define(stage, root_path.AppendChild(schema.GUIDES_NAME))
+    scope.CreatePurposeAttr(UsdGeom.Tokens.guide)
+    centers = np.asarray(parts.centers, dtype=np.float32).astype(np.float64).reshape(-1, 3)
+    radii = np.asarray(parts.radii, dtype=np.float32).astype(np.float64).reshape(-1)
+    taken = set()
+    for p, j in enumerate(np.asarray(parts.joints, dtype=np.int64)):
+        name = _ident(f"p{p}_{mesh.joint_names[j]}", taken)
+        sphere = UsdGeom.Sphere.Define(stage, scope.GetPath().AppendChild(name))
+        r = float(radii[p])
+        sphere.CreateRadiusAttr(r)
+        sphere.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(-r, -r, -r), Gf.Vec3f(r, r, r)]))
+        sphere.CreatePurposeAttr(UsdGeom.Tokens.guide)
+        gb = schema.guide_bind_transform(mesh.bind_transforms[j], centers[p])
+        sphere.AddTransformOp().Set(schema.matrices_to_usd(gb))
+        binding = UsdSkel.BindingAPI.Apply(sphere.GetPrim())
+        binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+        binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([int(j)]))
+        binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+        binding.CreateGeomBindTransformAttr(schema.matrices_to_usd(gb))
+        sphere.GetPrim().SetCustomDataByKey(schema.GUIDE_PART_KEY, int(p))
 
 
 def _clip_source(info: dict, mesh: SkinnedMesh) -> dict:

@@ -18,6 +18,8 @@ or ``tests/references/naive_queries.py``):
   (public: the query kernels and the import's surface distance share them);
 * :mod:`~runtime.kernels.contact`: the character controller's (contact summary, carrying a point
   with a moving surface);
+* :mod:`~runtime.kernels.swept`: the continuous contact query of :mod:`runtime.sweep` (a sphere
+  against triangles moving along their chords, conservative advancement);
 * :mod:`~runtime.kernels.config`: the fast-math policies.
 
 This package's face is the modules' public functions (below); the private kernels are reached

@@ -389,3 +389,17 @@ def test_noop_build_reads_no_asset_and_an_edited_output_is_read_again(project, m
     out.write_text(out.read_text().replace("dictionary build =", "dictionary built ="))  # no stamp: not ours
     r = run("build")
     assert counts(r) == (1, 2, 0) and opened == ["limb_b.usda"], (r.stdout, opened)
+
+
+def test_an_ogre_meshs_skeleton_is_part_of_the_key(tmp_path):
+    """An Ogre mesh's skeleton file is a dependency of its build key (binary and XML pairs)."""
+    import ogre_fixture
+    from colossus.cli.project import dependencies
+
+    limb = ogre_fixture.make_limb()
+    xml = ogre_fixture.write_xml(limb, tmp_path / "x")
+    binary = ogre_fixture.write_binary(limb, tmp_path / "b", skeleton_link="rig.skeleton")
+    assert [Path(d).name for d in dependencies(xml)] == ["limb.skeleton.xml"]
+    assert [Path(d).name for d in dependencies(binary)] == ["rig.skeleton"]
+    (tmp_path / "b" / "rig.skeleton").unlink()
+    assert dependencies(binary) == ["missing:rig.skeleton"]

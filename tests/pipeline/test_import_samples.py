@@ -221,6 +221,30 @@ def test_imported_assets_pass_every_validator(imported, model, ext):
     assert not [f for f in report.findings if f.severity in ("error", "warning")]
 
 
+@pytest.mark.parametrize("model,ext", [("creature", "fbx"), ("limb", "glb")])
+def test_every_clip_variant_and_guide_sphere_as_usdskel_bakes_them(imported, model, ext):
+    """Issue 24 items 2 and 3, done-when: the SkelRoot's ``clip`` variant set has one variant per
+    clip (the first the default); switching it changes what UsdSkel binds (BakeSkinning of each
+    variant is that clip as the runtime poses it, and the variants' shapes differ); the guide
+    spheres baked by UsdSkel are the runtime's ``pose.spheres`` within 1e-6 x size on every frame."""
+    from usdskel_bake import bake_every_variant
+
+    result, out = imported(model, ext)
+    b = bake_every_variant(out)
+    assert sorted(b["variants"]) == sorted(b["clips"]) and b["clips"] == [c.name for c in result.mesh.clips]
+    assert b["default"] == b["clips"][0]  # USD lists variant names sorted; the clips keep file order
+    assert b["guides"] == len(result.mesh.parts)
+    assert b["spheres"] <= 1e-6 * b["size"], b["spheres"] / b["size"]
+    assert b["mesh"] <= 1e-6 * b["size"], b["mesh"] / b["size"]
+    first, *others = b["variants"]
+    for other in others:  # the same time code, two variants: two different bound clips
+        common = np.intersect1d(b["times"][first], b["times"][other])
+        assert len(common)
+        i = np.searchsorted(b["times"][first], common)
+        j = np.searchsorted(b["times"][other], common)
+        assert np.abs(b["baked"][first][i] - b["baked"][other][j]).max() > 1e-3 * b["size"]
+
+
 def test_provenance_and_metadata(imported):
     from pxr import Usd, UsdGeom
 

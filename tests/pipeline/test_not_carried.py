@@ -30,6 +30,14 @@ def _items(path, **kw):
 
 
 @pytest.fixture
+def ufbx_road():
+    """The tests of what the ufbx road carries: skipped where .fbx goes through assimp."""
+    from paths import fbx_road
+    if fbx_road() != "ufbx":
+        pytest.skip("FBX goes through assimp here (no ufbx, or COLOSSUS_FBX_READER=assimp)")
+
+
+@pytest.fixture
 def assimp_road(monkeypatch):
     """FBX read through assimp (the road without ufbx), whose checks name what it cannot carry."""
     monkeypatch.setenv("COLOSSUS_FBX_READER", "assimp")
@@ -108,7 +116,7 @@ def _skin(top):
     return W.find(top, "Deformer", "Skin")[0]
 
 
-def test_fbx_dual_quaternion_skin_through_ufbx_is_carried_as_ufbx_skins_it(tmp_path):
+def test_fbx_dual_quaternion_skin_through_ufbx_is_carried_as_ufbx_skins_it(tmp_path, ufbx_road):
     """SkinningType DualQuaternion: the asset says dualQuaternion, nothing is named, and usd-core's
     skinning of the asset equals ufbx's own dual-quaternion skinning of the file (an independent
     reference) within 1e-5 x size at every frame of the clip."""
@@ -152,7 +160,7 @@ def test_fbx_dual_quaternion_skin_warns_once_with_a_bound_and_strict_refuses(tmp
     _one_line_refusal(paths[0], tmp_path, "fbx_skinning_type")
 
 
-def test_fbx_blend_skin_through_ufbx_takes_the_nearer_method_with_its_bound(tmp_path):
+def test_fbx_blend_skin_through_ufbx_takes_the_nearer_method_with_its_bound(tmp_path, ufbx_road):
     """Maya's per-vertex Blend: all weights 0 is linear (nothing named); one vertex at 0.5 is
     skinned linearly (the nearer) with the bound 0.5 x its own linear / dual-quaternion gap, at
     most half the dual-quaternion file's largest gap."""
@@ -208,7 +216,7 @@ def _rrss_edit(scale, inherit):
     return f
 
 
-def test_fbx_inherit_type_rrss_through_ufbx_is_carried_and_checked(tmp_path, monkeypatch):
+def test_fbx_inherit_type_rrss_through_ufbx_is_carried_and_checked(tmp_path, ufbx_road, monkeypatch):
     """ufbx evaluates RrSs under a non-uniformly scaled parent (its helper nodes hold the parent
     scale each bone must not inherit): the keys reproduce ufbx's native evaluation (the file loaded
     again without helpers, clusters on the real bones) at rest and at the checked frames, so
@@ -263,7 +271,7 @@ def test_fbx_transform_skin_is_bounded_by_the_node_offset(tmp_path, road, monkey
     _one_line_refusal(paths[0], tmp_path, "fbx_transform_skin")
 
 
-def test_fbx_geometric_transform_on_a_skinned_mesh_through_ufbx_is_carried(tmp_path):
+def test_fbx_geometric_transform_on_a_skinned_mesh_through_ufbx_is_carried(tmp_path, ufbx_road):
     """ufbx binds the geometry in its geometric transform's space: nothing is left out, and the
     bind positions are the unedited ones moved by the geometric offset (one rigid shift)."""
     from colossus.pipeline.readers import read
@@ -308,23 +316,28 @@ def test_fbx_instanced_skin_and_constraints(tmp_path, road, monkeypatch):
         assert whats.count("fbx_instanced_skin") == 1 and whats.count("fbx_constraints") == 1
 
 
+def _two_keys(flags):
+    """An edit cutting every moving curve to its first key and the one farthest from it, both with
+    the key flags ``flags`` (0x108 cubic ease, 0x104 linear)."""
+    def f(top):
+        for c in W.find(top, "AnimationCurve"):
+            kt = c.child("KeyTime").props[0][1]
+            kv = c.child("KeyValueFloat").props[0][1]
+            if np.ptp(kv) < 1e-3:
+                continue
+            mid = int(np.argmax(np.abs(kv - kv[0])))  # the key farthest from the first
+            W.set_child(c, "KeyTime", [("l", kt[[0, mid]])])
+            W.set_child(c, "KeyValueFloat", [("f", kv[[0, mid]])])
+            W.set_child(c, "KeyAttrFlags", [("i", np.array([flags], dtype=np.int32))])
+            W.set_child(c, "KeyAttrDataFloat", [("f", np.zeros(4, dtype=np.float32))])
+            W.set_child(c, "KeyAttrRefCount", [("i", np.array([2], dtype=np.int32))])
+    return f
+
+
 def test_fbx_cubic_curve_between_sparse_keys(tmp_path, assimp_road):
     """Rotation curves cut to their first key and the one farthest from it, with a cubic (ease) segment: the grid
     frames in between are off the straight line assimp draws; made linear, nothing fires."""
-    def edit(flags):
-        def f(top):
-            for c in W.find(top, "AnimationCurve"):
-                kt = c.child("KeyTime").props[0][1]
-                kv = c.child("KeyValueFloat").props[0][1]
-                if np.ptp(kv) < 1e-3:
-                    continue
-                mid = int(np.argmax(np.abs(kv - kv[0])))  # the key farthest from the first
-                W.set_child(c, "KeyTime", [("l", kt[[0, mid]])])
-                W.set_child(c, "KeyValueFloat", [("f", kv[[0, mid]])])
-                W.set_child(c, "KeyAttrFlags", [("i", np.array([flags], dtype=np.int32))])
-                W.set_child(c, "KeyAttrDataFloat", [("f", np.zeros(4, dtype=np.float32))])
-                W.set_child(c, "KeyAttrRefCount", [("i", np.array([2], dtype=np.int32))])
-        return f
+    edit = _two_keys
     cubic = _limb(tmp_path, edit(0x108), "cubic")
     for p in cubic:
         items = _items(p)
@@ -332,23 +345,11 @@ def test_fbx_cubic_curve_between_sparse_keys(tmp_path, assimp_road):
     assert _items(_limb(tmp_path, edit(0x104), "linear", ascii_too=False)[0]) == []
 
 
-def test_fbx_cubic_curve_through_ufbx_is_evaluated_at_every_frame(tmp_path):
+def test_fbx_cubic_curve_through_ufbx_is_evaluated_at_every_frame(tmp_path, ufbx_road):
     """ufbx evaluates the cubic segment at every grid frame: the frames are the curve's, nothing to name."""
     from colossus.pipeline.readers import read
 
-    def edit(top):
-        for c in W.find(top, "AnimationCurve"):
-            kt = c.child("KeyTime").props[0][1]
-            kv = c.child("KeyValueFloat").props[0][1]
-            if np.ptp(kv) < 1e-3:
-                continue
-            mid = int(np.argmax(np.abs(kv - kv[0])))
-            W.set_child(c, "KeyTime", [("l", kt[[0, mid]])])
-            W.set_child(c, "KeyValueFloat", [("f", kv[[0, mid]])])
-            W.set_child(c, "KeyAttrFlags", [("i", np.array([0x108], dtype=np.int32))])
-            W.set_child(c, "KeyAttrDataFloat", [("f", np.zeros(4, dtype=np.float32))])
-            W.set_child(c, "KeyAttrRefCount", [("i", np.array([2], dtype=np.int32))])
-    p = _limb(tmp_path, edit, "cubic", ascii_too=False)[0]
+    p = _limb(tmp_path, _two_keys(0x108), "cubic", ascii_too=False)[0]
     assert _items(p) == []
     # every grid frame is the curve's own: between the two keys the clip is off the straight
     # (slerp) line assimp would draw, by the ease
@@ -395,22 +396,47 @@ def _glb_with(tmp_path, edit, name):
     return out
 
 
+def _pointer_channel(a, ptr, sampler=0):
+    a["channels"].append({"sampler": a["channels"][sampler]["sampler"],
+                          "target": {"path": "pointer", "extensions": {"KHR_animation_pointer": {"pointer": ptr}}}})
+
+
 def test_gltf_extensions_that_move_the_body_are_named(tmp_path):
     def pointer(j):
         j["extensionsUsed"] = ["KHR_animation_pointer", "KHR_materials_volume", "VRMC_springBone"]
         a = j["animations"][0]
-        a["channels"].append({"sampler": a["channels"][0]["sampler"],
-                              "target": {"path": "pointer", "extensions": {
-                                  "KHR_animation_pointer": {"pointer": "/nodes/1/rotation"}}}})
+        rot = next(i for i, c in enumerate(a["channels"]) if c["target"].get("path") == "rotation")
+        _pointer_channel(a, "/nodes/1/rotation", rot)  # read as a plain channel (issue 20 item 7)
+        _pointer_channel(a, "/nodes/1/weights")        # morph weights: not carried, named
     p = _glb_with(tmp_path, pointer, "pointer")
     items = _items(p)
     assert [(x["what"], x["where"]) for x in items] == [("gltf_extension", ["KHR_animation_pointer"]),
                                                         ("gltf_extension", ["VRMC_springBone"])]
+    assert "/nodes/1/weights" in items[0]["detail"] and "/nodes/1/rotation" not in items[0]["detail"]
     _one_line_refusal(p, tmp_path, "gltf_extension")
-    # used, but only for materials, or pointers at materials: nothing
+    # used, but only for materials, pointers at materials, cameras or lights, or node transforms: nothing
     def harmless(j):
         j["extensionsUsed"] = ["KHR_materials_volume", "KHR_animation_pointer", "KHR_mesh_quantization"]
+        a = j["animations"][0]
+        rot = next(i for i, c in enumerate(a["channels"]) if c["target"].get("path") == "rotation")
+        for ptr in ("/materials/0/pbrMetallicRoughness/baseColorFactor", "/cameras/0/perspective/yfov",
+                    "/extensions/KHR_lights_punctual/lights/0/color"):
+            _pointer_channel(a, ptr)
+        _pointer_channel(a, "/nodes/2/rotation", rot)
     assert _items(_glb_with(tmp_path, harmless, "harmless")) == []
+    # what else under a node or a mesh can move the body stays named
+    for ptr in ("/meshes/0/weights", "/nodes/0/matrix", "/nodes/1/extensions/KHR_node_visibility/visible"):
+        q = _glb_with(tmp_path, lambda j, ptr=ptr: (j.update(extensionsUsed=["KHR_animation_pointer"]),
+                                                   _pointer_channel(j["animations"][0], ptr)), "named")
+        assert [x["where"] for x in _items(q)] == [["KHR_animation_pointer"]], ptr
+
+
+def test_gltf_animation_pointer_at_a_missing_node_is_refused_in_one_line(tmp_path):
+    p = _glb_with(tmp_path, lambda j: (j.update(extensionsUsed=["KHR_animation_pointer"]),
+                                       _pointer_channel(j["animations"][0], "/nodes/99/rotation")), "far")
+    r = _cli("import", p, "-o", tmp_path / "far.usda")
+    assert r.exit_code == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "far.glb" in r.stderr and "/nodes/99/rotation" in r.stderr
 
 
 def test_gltf_required_extension_not_read_is_refused_in_one_line(tmp_path):
@@ -548,7 +574,7 @@ def test_numpy_dual_quaternions_agree_with_usd_core(tmp_path):
 
 
 # ------------------------------------------------------------------------------ the record
-def test_summary_json_provenance_and_inspect_carry_the_record(tmp_path):
+def test_summary_json_provenance_and_inspect_carry_the_record(tmp_path, assimp_road):
     p = paths_dq(tmp_path)
     out = tmp_path / "dq.usda"
     r = _cli("import", p, "-o", out, "--json")

@@ -16,7 +16,8 @@ What it covers
   ``sum_k w_k * jointWorld_k(t) @ IBM_k @ p`` over every ``JOINTS_n``/``WEIGHTS_n`` set; the
   mesh node's own transform is ignored (3.7.3.3).  An unskinned primitive moves rigidly with its
   node's world transform, hence with any joint it is parented to.
-* Animations (3.11): channels on ``translation``/``rotation``/``scale``; samplers ``LINEAR``
+* Animations (3.11): channels on ``translation``/``rotation``/``scale`` (also when a
+  ``KHR_animation_pointer`` channel names them as ``/nodes/{i}/translation`` ...); samplers ``LINEAR``
   (lerp, and slerp for rotations along the shorter arc, as Appendix "Interpolation" and every
   implementation do), ``STEP`` and ``CUBICSPLINE`` (Hermite with in/out tangents scaled by the
   key interval, rotations normalised after).  Times are seconds; outside a sampler's key range
@@ -516,6 +517,10 @@ class GltfDocument:
         wchans = []
         for ch in a.get("channels", []):
             tgt = ch.get("target", {})
+            if tgt.get("path") == "pointer":  # KHR_animation_pointer: a JSON pointer names the property
+                tgt = self._pointer_target(index, tgt)
+                if tgt is None:
+                    continue
             if "node" not in tgt:
                 continue
             samp = a["samplers"][ch["sampler"]]
@@ -547,6 +552,24 @@ class GltfDocument:
         name = a.get("name") or f"animation_{index}"
         kt = np.unique(np.concatenate(times)) if times else np.zeros(0)
         return Animation(index, name, kt, tuple(sorted(interps)), morph, tuple(chans), tuple(wchans))
+
+    def _pointer_target(self, index, tgt):
+        """A ``KHR_animation_pointer`` target as the plain target it stands for, when its JSON
+        pointer (RFC 6901) is ``/nodes/{i}/translation|rotation|scale|weights``; None for any
+        other pointer (materials, cameras, lights, ...: nothing this evaluator poses).
+
+        KHR_animation_pointer: https://github.com/KhronosGroup/glTF/tree/main/extensions/2.0/Khronos/KHR_animation_pointer
+        (the channel's ``target.path`` is ``"pointer"`` and ``target.node`` is absent; the sampler
+        animates the property the pointer names exactly as a plain channel would)."""
+        ptr = ((tgt.get("extensions") or {}).get("KHR_animation_pointer") or {}).get("pointer")
+        if not isinstance(ptr, str):
+            raise GltfError(f"{self.path}: animation {index}: a pointer channel without a pointer")
+        parts = [p.replace("~1", "/").replace("~0", "~") for p in ptr.split("/")[1:]] if ptr.startswith("/") else []
+        if len(parts) != 3 or parts[0] != "nodes" or parts[2] not in ("translation", "rotation", "scale", "weights"):
+            return None
+        if not parts[1].isdigit() or int(parts[1]) >= len(self.doc.get("nodes", [])):
+            raise GltfError(f"{self.path}: animation {index}: pointer {ptr!r} names no node")
+        return {"node": int(parts[1]), "path": parts[2]}
 
     @staticmethod
     def sample(inp, out, interp, path, times) -> np.ndarray:

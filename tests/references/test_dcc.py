@@ -25,7 +25,9 @@ pytestmark = pytest.mark.skipif(not os.path.isdir(DCC), reason="corpus/dcc not p
 
 
 def _import(name, tmp_path):
-    pytest.importorskip("ufbx")
+    from paths import fbx_road
+    if fbx_road() != "ufbx":
+        pytest.skip("FBX goes through assimp here: its DCC errors are named, not matched (test_not_carried)")
     from colossus.cli import main
     out = tmp_path / (name + ".usda")
     r = CliRunner().invoke(main, ["import", os.path.join(DCC, name), "-o", str(out), "--json"], prog_name="colossus")

@@ -371,6 +371,92 @@ def test_harness_catches_a_time_shift_and_a_unit_error(corpus, tmp_path):
     assert rep.missing == rep.reference_vertices  # nothing sits where the reference says
 
 
+# =============================================================================== KHR_animation_pointer
+SAMPLE_LIMB = ROOT / "samples" / "limb.glb"
+
+
+def _glb_json(path):
+    data = pathlib.Path(path).read_bytes()
+    n = struct.unpack_from("<I", data, 12)[0]
+    return json.loads(data[20:20 + n]), data[20 + n:]
+
+
+def _write_glb(path, j, rest):
+    js = json.dumps(j).encode()
+    js += b" " * (-len(js) % 4)
+    body = struct.pack("<II", len(js), 0x4E4F534A) + js + rest
+    pathlib.Path(path).write_bytes(b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body)
+    return path
+
+
+def pointer_limb(path, harmless=True):
+    """samples/limb.glb with every animation channel moved into ``KHR_animation_pointer``
+    (``target: {path: "pointer", extensions: {KHR_animation_pointer: {pointer: "/nodes/i/trs"}}}``,
+    no ``node``, as the extension says), plus, when ``harmless``, a channel pointing at a
+    material's base colour (driven by a VEC4 sampler of the clip): nothing a collider carries."""
+    j, rest = _glb_json(SAMPLE_LIMB)
+    j["extensionsUsed"] = sorted(set(j.get("extensionsUsed") or []) | {"KHR_animation_pointer"})
+    for a in j["animations"]:
+        for ch in a["channels"]:
+            t = ch["target"]
+            ch["target"] = {"path": "pointer", "extensions": {
+                "KHR_animation_pointer": {"pointer": f"/nodes/{t['node']}/{t['path']}"}}}
+        if harmless:
+            vec4 = next(c["sampler"] for c in a["channels"]
+                        if c["target"]["extensions"]["KHR_animation_pointer"]["pointer"].endswith("/rotation"))
+            j.setdefault("materials", []).append({"pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1]}})
+            a["channels"].append({"sampler": vec4, "target": {"path": "pointer", "extensions": {"KHR_animation_pointer": {
+                "pointer": f"/materials/{len(j['materials']) - 1}/pbrMetallicRoughness/baseColorFactor"}}}})
+    return _write_glb(path, j, rest)
+
+
+def test_gltf_evaluator_plays_animation_pointer_channels_as_plain_ones(tmp_path):
+    """The spec evaluator, extended to KHR_animation_pointer: the limb with its channels moved
+    into pointers poses exactly as the plain limb at every key and between keys."""
+    plain = gltf_eval.load(SAMPLE_LIMB)
+    ptr = gltf_eval.load(pointer_limb(tmp_path / "pointer.glb"))
+    assert [a.name for a in ptr.animations] == [a.name for a in plain.animations]
+    for a, b in zip(plain.animations, ptr.animations):
+        assert len(b.channels) == len(a.channels) > 0  # the material pointer is not a node channel
+        np.testing.assert_array_equal(a.key_times, b.key_times)
+        times = np.concatenate([a.key_times, (a.key_times[1:] + a.key_times[:-1]) / 2])
+        for pa, pb in zip(plain.poses(a.index, times), ptr.poses(b.index, times)):
+            for x, y in zip(pa, pb):
+                np.testing.assert_array_equal(x, y)
+    # and a pointer channel does move the evaluator's pose (it is not ignored)
+    rest = ptr.pose(None, 0.0)
+    travel = max(float(np.abs(x - y).max()) for t in ptr.animations[0].key_times
+                 for x, y in zip(ptr.pose(0, float(t)), rest))
+    assert travel > 0.1 * _size(np.concatenate(rest))
+
+
+def test_gltf_animation_pointer_limb_moves_as_the_plain_limb_and_the_evaluator(tmp_path):
+    """KHR_animation_pointer node channels (issue 20 item 7) are read as ordinary channels: the
+    asset of the pointer limb moves as the plain limb's asset (1e-6 x size) and as the spec
+    evaluator says (1e-4 x size at keys and between keys); nothing is named as not carried."""
+    from colossus.pipeline.run import import_asset
+
+    src = pointer_limb(tmp_path / "pointer.glb")
+    a_ptr, a_plain = tmp_path / "pointer.usda", tmp_path / "plain.usda"
+    r = import_asset(src, a_ptr)
+    import_asset(SAMPLE_LIMB, a_plain)
+    summary = r.summary()
+    assert summary["not_carried"] == [] and not any("KHR_animation_pointer" in w for w in summary["warnings"])
+    rig_p, rig_q = compare.AssetRig(a_plain), compare.AssetRig(a_ptr)
+    assert rig_p.clips == rig_q.clips and rig_p.clips
+    size = _size(rig_p.rest())
+    for clip in rig_p.clips:
+        tc = rig_p.clip_times(clip)
+        np.testing.assert_array_equal(tc, rig_q.clip_times(clip))
+        tc = np.concatenate([tc, (tc[1:] + tc[:-1]) / 2])
+        err = np.abs(rig_p.points(clip, tc) - rig_q.points(clip, tc)).max() / size
+        assert err <= 1e-6, (clip, err)
+    rep = compare.compare(src, a_ptr, max_instants=0)
+    assert rep.missing == 0 and rep.reference_vertices > 0
+    assert rep.problems() == [], rep.problems()
+    assert all(c.err_keys is not None and c.err_mid is not None for c in rep.clips)
+
+
 # =============================================================================== (b) the corpus
 #: measured on the issue-9 importer (``python -m tests.references.diagnose``); see FINDINGS.md
 XFAIL = {
@@ -448,3 +534,21 @@ def test_reference_code_imports_nothing_of_the_project():
                 [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else [])
             for n in names:
                 assert n.split(".")[0] not in {"colossus", "pipeline", "validators", "runtime"}, (f.name, node.lineno, n)
+
+
+@pytest.mark.parametrize("name", ["realworld/playcanvas_lumberjack.glb", "assimp/huesitos.fbx"])
+def test_corpus_guide_spheres_and_clip_variants_as_usd_bakes_them(corpus, tmp_path, name):
+    """Issue 24 items 2 and 3 on real characters (the lumberjack: a centimetre mesh bound by scaled
+    joints, 3 clips): one ``clip`` variant per clip, the first the default; each variant baked by
+    ``UsdSkel.BakeSkinning`` is the runtime's pose of that clip, and the guide spheres baked with it
+    are the runtime's ``pose.spheres``, within 1e-6 x size (8 frames of each clip)."""
+    from colossus.pipeline.run import import_asset
+    from usdskel_bake import bake_every_variant
+
+    out = tmp_path / "asset.usda"
+    result = import_asset(corpus / name, out)
+    b = bake_every_variant(out, frames_per_clip=8)
+    assert sorted(b["variants"]) == sorted(b["clips"]) and b["default"] == b["clips"][0]  # USD sorts variant names
+    assert b["guides"] == len(result.mesh.parts)
+    assert b["spheres"] <= 1e-6 * b["size"] and b["mesh"] <= 1e-6 * b["size"], (b["spheres"] / b["size"],
+                                                                                b["mesh"] / b["size"])

@@ -4,8 +4,9 @@
 at each time with ``evaluate_skinning=True`` (linear, dual-quaternion and Maya's blended
 skinning, blend shapes, as ufbx evaluates them against Maya's and 3ds Max's own output) and
 returns every skinned mesh's points in world space: our reader's code is not involved.  It runs
-in a forked child (the registry binding 0.0.5 frees element wrappers it still hands out; the
-child leaves by ``os._exit``), and takes one reference per element it reads for the same reason.
+in a forked worker (the registry binding 0.0.5 frees element wrappers it still hands out; the
+worker is terminated, never garbage-collected), and takes one reference per element it reads
+for the same reason.
 """
 
 from __future__ import annotations
@@ -49,6 +50,12 @@ def _skinned(path, seconds):
 
 def skinned_points(path, seconds) -> list:
     """``[(n, 3) float64]``: ufbx's skinned world points of every skinned mesh at each time
-    (seconds, first stack), in the file's own axes and units."""
-    from colossus.pipeline import isolation
-    return isolation.contained(_skinned, str(path), list(seconds), path=str(path), timeout=300)
+    (seconds, first stack), in the file's own axes and units.  (A forked worker of the standard
+    library: the references import nothing of the project.)"""
+    import multiprocessing
+    import warnings
+
+    with warnings.catch_warnings():  # the worker only runs ufbx: no thread of the parent is needed
+        warnings.simplefilter("ignore", DeprecationWarning)
+        with multiprocessing.get_context("fork").Pool(1) as pool:
+            return pool.apply(_skinned, (str(path), list(seconds)))

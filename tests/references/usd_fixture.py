@@ -9,8 +9,9 @@ long), ``elementSize`` 4, two clips: ``bend`` (24 frames, time codes 0..23: mid 
 about Z) and ``twist`` (12 frames, time codes 100..111: the root twists about Y and slides in
 X).  Parts: one per joint, each triangle to the joint with the largest summed weight.  Spheres:
 centre = middle of the joint-space bounding box of the part's vertices over the bind pose and
-all frames, radius = farthest such vertex x (1 + pad) + 1e-3.  Everything here is computed in
-plain numpy, independently of ``validators``.
+all frames, radius = farthest such vertex x (1 + pad) + 1e-3; each part's guide sphere (a
+``UsdGeom.Sphere`` under ``PartSpheres``) and the ``clip`` variant set binding each clip, as the
+contract says.  Everything here is computed in plain numpy, independently of ``validators``.
 """
 
 from __future__ import annotations
@@ -216,9 +217,15 @@ def build_test_stage(*, name="Tube", rings=20, segments=20, max_influences=4,
     skel.CreateJointsAttr(JOINTS)
     skel.CreateBindTransformsAttr(Vt.Matrix4dArray([_m4(m) for m in bind]))
     skel.CreateRestTransformsAttr(Vt.Matrix4dArray([_m4(m) for m in rest]))
-    sb = UsdSkel.BindingAPI.Apply(skel.GetPrim())
-    if clips:
-        sb.CreateAnimationSourceRel().SetTargets([Sdf.Path(f"/{name}/{clips[0][0]}")])
+    UsdSkel.BindingAPI.Apply(skel.GetPrim())
+    if clips:  # the contract's variant set "clip": each variant binds one clip, the first the default
+        vset = root.GetPrim().GetVariantSets().AddVariantSet("clip")
+        for cname, _ in clips:
+            vset.AddVariant(cname)
+            vset.SetVariantSelection(cname)
+            with vset.GetVariantEditContext():
+                UsdSkel.BindingAPI(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([Sdf.Path(f"/{name}/{cname}")])
+        vset.SetVariantSelection(clips[0][0])
 
     mesh = UsdGeom.Mesh.Define(stage, f"/{name}/Collider")
     mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(mesh_pts))
@@ -249,6 +256,24 @@ def build_test_stage(*, name="Tube", rings=20, segments=20, max_influences=4,
     prim.SetCustomDataByKey("colossus", {
         "source": "tube.blend", "sourceSha256": hashlib.sha256(b"tube").hexdigest(),
         "importer": "usd_fixture", "settings": {"max_influences": max_influences}})
+    # the contract's guide spheres: one per part, guide purpose, rigidly bound to its joint; the
+    # origin of the sphere's space is the centre: geomBind = bind_j @ T(centre)
+    UsdGeom.Scope.Define(stage, f"/{name}/PartSpheres")
+    for p, jname in enumerate(JOINTS):
+        c32 = centers[p].astype(np.float32).astype(np.float64)
+        r32 = float(np.float32(radii[p]))
+        gbm = bind[p] @ np.block([[np.eye(3), c32[:, None]], [np.zeros((1, 3)), np.ones((1, 1))]])
+        sph = UsdGeom.Sphere.Define(stage, f"/{name}/PartSpheres/part{p}")
+        sph.CreateRadiusAttr(r32)
+        sph.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(-r32, -r32, -r32), Gf.Vec3f(r32, r32, r32)]))
+        sph.CreatePurposeAttr(UsdGeom.Tokens.guide)
+        sph.AddTransformOp().Set(_m4(gbm))
+        sbind = UsdSkel.BindingAPI.Apply(sph.GetPrim())
+        sbind.CreateSkeletonRel().SetTargets([skel.GetPath()])
+        sbind.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([p]))
+        sbind.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+        sbind.CreateGeomBindTransformAttr(_m4(gbm))
+        sph.GetPrim().SetCustomDataByKey("colossus:part", p)
 
     for cname, times, t, q, s in clip_data:
         anim = UsdSkel.Animation.Define(stage, f"/{name}/{cname}")

@@ -211,6 +211,9 @@ def b403(s):
 
 def b404(s):
     _edit(s, MESH, "colossus:parts:radii", lambda a: (a * 3).astype(np.float32))
+    for p in range(3):  # the guide spheres kept in agreement (COL408 judges them, not this)
+        r = UsdGeom.Sphere(s.GetPrimAtPath(f"{ROOT}/PartSpheres/part{p}")).GetRadiusAttr()
+        r.Set(float(np.float32(r.Get()) * np.float32(3)))
 
 
 def b405(s):
@@ -223,6 +226,92 @@ def b406(s):
     _edit(s, MESH, "colossus:parts:centers", lambda a: np.vstack([a, [[0, 0, 0]]]).astype(np.float32))
     _edit(s, MESH, "colossus:parts:radii", lambda a: np.r_[a, 0.5].astype(np.float32))
     _edit(s, MESH, "colossus:parts:faceOffsets", lambda a: np.r_[a, a[-1]].astype(np.int32))
+
+
+def b408(s):
+    """A part's radius grown in colossus:parts:radii but not on its guide sphere."""
+    _edit(s, MESH, "colossus:parts:radii", lambda a: (a.__setitem__(1, a[1] * 1.1), a)[1].astype(np.float32))
+
+
+def test_col408_guide_sphere_breakages(good_path):
+    """Each way a guide sphere can disagree with the parts is named: moved centre, wrong joint,
+    not guide purpose, a missing one, one naming no part; the good asset's spheres agree."""
+    def findings(edit):
+        stage = open_copy(good_path)
+        edit(stage)
+        r = check_asset(stage)
+        assert not r.by_code("COL002"), [f.message for f in r.by_code("COL002")]
+        return [f.message for f in r.by_code("COL408")]
+
+    sph = f"{ROOT}/PartSpheres/part1"
+
+    def moved(s):
+        a = UsdSkel.BindingAPI(s.GetPrimAtPath(sph)).GetGeomBindTransformAttr()
+        m = Gf.Matrix4d(a.Get())
+        m.SetTranslateOnly(m.ExtractTranslation() + Gf.Vec3d(0.01, 0, 0))
+        a.Set(m)
+    (m,) = findings(moved)
+    assert "part 1" in m and "centre" in m
+    (m,) = findings(lambda s: UsdSkel.BindingAPI(s.GetPrimAtPath(sph)).GetJointIndicesPrimvar().Set(Vt.IntArray([2])))
+    assert "not rigidly bound" in m
+    (m,) = findings(lambda s: UsdGeom.Imageable(s.GetPrimAtPath(sph)).GetPurposeAttr().Set("default"))
+    assert "purpose" in m
+    (m,) = findings(lambda s: s.RemovePrim(sph))
+    assert "1 of 3 parts have no guide sphere" in m
+    (m,) = findings(lambda s: UsdGeom.Sphere.Define(s, f"{ROOT}/PartSpheres/stray"))
+    assert "names no part" in m
+
+
+def _clip_vset_spec(s):
+    return s.GetRootLayer().GetPrimAtPath(ROOT).variantSets["clip"]
+
+
+def b509(s):
+    """An asset whose 'twist' clip no USD tool can reach: its variant is gone."""
+    vs = _clip_vset_spec(s)
+    vs.RemoveVariant(vs.variants["twist"])
+
+
+def test_col509_clip_variant_breakages(good_path):
+    """Each way the clip variants can fail other tools is named: a variant binding another clip, a
+    selection other than the first clip, a local animationSource overriding the variants, no
+    variant set at all."""
+    def findings(edit):
+        stage = open_copy(good_path)
+        edit(stage)
+        r = check_asset(stage)
+        assert not r.by_code("COL002"), [f.message for f in r.by_code("COL002")]
+        return [f.message for f in r.by_code("COL509")]
+
+    def wrong_target(s):
+        v = _clip_vset_spec(s).variants["twist"].primSpec
+        v.nameChildren["Skeleton"].relationships["skel:animationSource"].targetPathList.explicitItems = [
+            Sdf.Path(f"{ROOT}/bend")]
+    (m,) = findings(wrong_target)
+    assert "variant 'twist' binds" in m
+    (m,) = findings(lambda s: s.GetPrimAtPath(ROOT).GetVariantSets().GetVariantSet("clip").SetVariantSelection("twist"))
+    assert "selection is 'twist'" in m
+    (m,) = findings(lambda s: s.GetPrimAtPath(SKEL).GetRelationship("skel:animationSource").SetTargets(
+        [Sdf.Path(f"{ROOT}/bend")]))
+    assert "stronger than every variant" in m
+    (m,) = findings(lambda s: s.GetRootLayer().GetPrimAtPath(ROOT).variantSetNameList.ClearEdits() or
+                    s.GetRootLayer().GetPrimAtPath(ROOT).variantSets.__delitem__("clip"))
+    assert "no variant set 'clip'" in m
+
+
+def test_clip_variants_bind_every_clip(good_path):
+    """The fixture, as the contract says: switching the SkelRoot's 'clip' variant binds that clip
+    (the composed skel:animationSource), the first the default, and the validator is clean under
+    every selection."""
+    stage = open_copy(good_path)
+    vset = stage.GetPrimAtPath(ROOT).GetVariantSets().GetVariantSet("clip")
+    assert vset.GetVariantNames() == ["bend", "twist"] and vset.GetVariantSelection() == "bend"
+    for clip in ("twist", "bend"):
+        vset.SetVariantSelection(clip)
+        rel = stage.GetPrimAtPath(SKEL).GetRelationship("skel:animationSource")
+        assert [str(t) for t in rel.GetTargets()] == [f"{ROOT}/{clip}"]
+    r = check_asset(stage)
+    assert r.findings == [], [(f.code, f.message) for f in r.findings]
 
 
 def b501(s):
@@ -531,3 +620,31 @@ def test_col701_proxy_deviation_within_max_deviation(good_path):
     assert "COL701" in check_asset(stage).codes()
     with pytest.raises(Exception):
         check_asset(stage, max_deviation="wide")
+
+
+@pytest.mark.parametrize("arc", ["reference", "payload", "none"])
+def test_col004_looks_inside_variants(good_path, tmp_path, arc):
+    """The clip variants are local opinions, not arcs to files: an asset with them is read and
+    passes; a reference or payload to another file authored inside a variant is COL004 (read from
+    the layer alone, the named file never opened) and the runtime refuses it."""
+    from colossus.runtime import ColliderError, load_collider
+
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "o.usda").write_text("#usda 1.0\n")
+    layer = Sdf.Layer.OpenAsAnonymous(str(good_path))
+    variant = layer.GetPrimAtPath(ROOT).variantSets["clip"].variants["twist"].primSpec
+    if arc != "none":
+        spec = Sdf.PrimSpec(variant, "Extra", Sdf.SpecifierOver)
+        arcs = spec.referenceList if arc == "reference" else spec.payloadList
+        arcs.Prepend(Sdf.Reference("outside/o.usda") if arc == "reference" else Sdf.Payload("outside/o.usda"))
+    asset = tmp_path / "a.usda"
+    asset.write_text(layer.ExportToString())
+    r = check_asset(str(asset))
+    if arc == "none":
+        assert r.findings == [], [(f.code, f.message) for f in r.findings]
+        assert load_collider(asset).clips == ["bend", "twist"]
+        return
+    assert r.codes() == {"COL004"} and "outside/o.usda" in r.findings[0].message
+    with pytest.raises(ColliderError, match="names other files"):
+        load_collider(asset)

@@ -130,3 +130,68 @@ def animation_source(asset, ctx):
     want = str(asset.clips[0].prim.GetPath())
     if targets != [want]:
         yield hit(f"skel:animationSource targets {targets}, expected [{want}]", prim=str(asset.skeleton.GetPath()))
+
+
+@rule("COL509", "clip-variants", "warning",
+      "The SkelRoot's variant set 'clip' binds each clip as skel:animationSource, the first clip the default selection.",
+      needs=("clips",))
+def clip_variants(asset, ctx):
+    """What: the SkelRoot has a variant set `clip` with one variant per clip, named as the clip,
+    whose opinion on the Skeleton is `skel:animationSource` = that clip; its selection is the first
+    clip; and no opinion outside the variants binds a clip (a local `skel:animationSource` on the
+    Skeleton is stronger than every variant: switching would change nothing).  Read from the
+    asset's layer (the variants' specs), so the stage checked is never edited.
+    Why: UsdSkel binds one animation; the variants are how usdview, Blender and Omniverse users reach
+    every other clip (the runtime and the proof read every SkelAnimation directly).
+    Example: an asset written before the variant set existed: other tools show one clip of ten."""
+    from colossus.runtime import schema
+
+    root = asset.root
+    where = str(root.GetPath())
+    clip_paths = {c.name: str(c.prim.GetPath()) for c in asset.clips}
+    vset = root.GetVariantSets().GetVariantSet(schema.CLIP_VARIANT_SET) if root.GetVariantSets().HasVariantSet(
+        schema.CLIP_VARIANT_SET) else None
+    if vset is None:
+        yield hit(f"{where} has no variant set {schema.CLIP_VARIANT_SET!r}: other USD tools reach only the bound "
+                  f"clip of {len(clip_paths)}", prim=where)
+        return
+    names = set(vset.GetVariantNames())
+    missing = [c for c in clip_paths if c not in names]
+    if missing:
+        yield hit(f"{len(missing)} clip(s) have no variant in {schema.CLIP_VARIANT_SET!r}, first {missing[0]!r}: "
+                  "other USD tools cannot reach them", prim=where, clip=missing[0], count=len(missing))
+    sel = vset.GetVariantSelection()
+    first = asset.clips[0].name
+    if sel != first:
+        yield hit(f"the {schema.CLIP_VARIANT_SET!r} variant selection is {sel!r}, expected the first clip {first!r}",
+                  prim=where, clip=first)
+    skel_rel = f"{asset.skeleton.GetPath().name}"
+    rel_name = "skel:animationSource"
+
+    def targets(prim_spec):
+        """The skeleton's authored animationSource targets in ``prim_spec`` (the root's spec or a
+        variant's), or None where it has no opinion."""
+        if prim_spec is None or asset.skeleton.GetPath().GetParentPath() != root.GetPath():
+            return None
+        child = prim_spec.nameChildren.get(skel_rel) if prim_spec.nameChildren else None
+        rel = child.relationships.get(rel_name) if child is not None and child.relationships else None
+        if rel is None:
+            return None
+        items = rel.targetPathList
+        return [str(p) for p in (items.explicitItems if items.isExplicit else
+                                 list(items.prependedItems) + list(items.appendedItems) + list(items.addedItems))]
+
+    layer = asset.stage.GetRootLayer()
+    spec = layer.GetPrimAtPath(root.GetPath())
+    local = targets(spec)
+    if local:
+        yield hit(f"{asset.skeleton.GetPath()} binds {local} outside the {schema.CLIP_VARIANT_SET!r} variants: that "
+                  "opinion is stronger than every variant, so switching them changes nothing",
+                  prim=str(asset.skeleton.GetPath()))
+    vspecs = spec.variantSets.get(schema.CLIP_VARIANT_SET) if spec is not None and spec.variantSets else None
+    for name in sorted(names & set(clip_paths)):
+        v = vspecs.variants.get(name) if vspecs is not None else None
+        got = targets(v.primSpec) if v is not None else None
+        if got != [clip_paths[name]]:
+            yield hit(f"variant {name!r} binds {got} as the Skeleton's {rel_name}, expected [{clip_paths[name]}]",
+                      prim=where, clip=name)

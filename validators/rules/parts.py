@@ -135,3 +135,86 @@ def empty_part(asset, ctx):
     for p in np.nonzero(np.diff(asset.part_offsets) == 0)[0]:
         yield hit(f"part {p} (joint {asset.part_joints[p]!r}) has no triangles", part=int(p),
                   joint=asset.part_joints[p])
+
+
+@rule("COL408", "guide-spheres", "warning",
+      "Each part has one guide-purpose UsdGeom.Sphere, rigidly bound to its joint, that UsdSkel moves exactly as the part's sphere.",
+      needs=("spheres",))
+def guide_spheres(asset, ctx):
+    """What: the `UsdGeom.Sphere` prims under the SkelRoot (the contract's guide spheres, one per
+    part, `customData` `colossus:part` = its part index) agree with `colossus:parts:*`, which stay
+    the truth: purpose `guide`; `UsdSkelBindingAPI` with `skel:skeleton` targeting the Skeleton and
+    constant-interpolation `primvars:skel:jointIndices` = [the part's joint] / `jointWeights` = [1];
+    radius = the part's radius; and UsdSkel's rigid skinning of the sphere
+    (`S_j(t) @ inv(bind_j) @ geomBindTransform`) puts its centre on the part's joint-space centre
+    with no rotation or scale of its own (within 1e-6 x model size, 1e-6 x radius), so at every
+    time it is the runtime's `pose.spheres[p]`.  A part without its sphere, a sphere naming no
+    part, or two for one part are reported too.
+    Why: usdview, Blender and Omniverse users see what the validator proved only through these
+    spheres; one that disagrees shows a wrong sphere (the runtime and the proof read the attributes).
+    Example: a part's radius grown in `colossus:parts:radii` but not on its guide sphere."""
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    from colossus.runtime import schema
+
+    size = asset.model_size
+    P = len(asset.part_joints)
+    seen = {}
+    skel_path = str(asset.skeleton.GetPath())
+    for prim in Usd.PrimRange(asset.root):
+        if not prim.IsA(UsdGeom.Sphere):
+            continue
+        where = str(prim.GetPath())
+        p = prim.GetCustomDataByKey(schema.GUIDE_PART_KEY)
+        if not isinstance(p, int) or isinstance(p, bool) or not 0 <= p < P:
+            yield hit(f"sphere {where} names no part (customData {schema.GUIDE_PART_KEY} = {p!r}; {P} parts)",
+                      prim=where)
+            continue
+        if p in seen:
+            yield hit(f"part {p} has two guide spheres: {seen[p]} and {where}", prim=where, part=p)
+            continue
+        seen[p] = where
+        joint = asset.part_joints[p]
+        j = int(asset.part_joint_ids[p])
+        problems = []
+        purpose = UsdGeom.Imageable(prim).ComputePurpose()
+        if purpose != UsdGeom.Tokens.guide:
+            problems.append(f"purpose is {purpose!r}, not 'guide'")
+        b = UsdSkel.BindingAPI(prim)
+        rel = b.GetSkeletonRel()
+        targets = [str(t) for t in rel.GetTargets()] if rel else []
+        if "SkelBindingAPI" not in prim.GetAppliedSchemas() or targets != [skel_path]:
+            problems.append(f"not bound to {skel_path} (SkelBindingAPI, skel:skeleton targets {targets})")
+        ip, wp = b.GetJointIndicesPrimvar(), b.GetJointWeightsPrimvar()
+        ji = list(ip.Get()) if ip and ip.HasAuthoredValue() else None
+        jw = list(wp.Get()) if wp and wp.HasAuthoredValue() else None
+        if (ji != [j] or jw is None or len(jw) != 1 or abs(float(jw[0]) - 1.0) > 1e-6
+                or ip.GetInterpolation() != UsdGeom.Tokens.constant or wp.GetInterpolation() != UsdGeom.Tokens.constant):
+            problems.append(f"not rigidly bound to joint {joint!r} (index {j}): constant jointIndices {ji}, "
+                            f"jointWeights {jw}")
+        r = UsdGeom.Sphere(prim).GetRadiusAttr().Get()
+        want_r = float(asset.part_radii[p])
+        if r is None or not abs(float(r) - want_r) <= tol.GUIDE_RELATIVE * want_r:
+            problems.append(f"radius {r} != the part's {want_r:.9g}")
+        gba = b.GetGeomBindTransformAttr()
+        gb = schema.matrices_from_usd(gba.Get()) if gba and gba.HasAuthoredValue() else np.eye(4)
+        # the sphere in joint space: inv(bind_j) @ geomBind maps its origin to its centre
+        with np.errstate(all="ignore"):
+            m = asset.inv_bind[j] @ gb
+        c = m[:3, 3]
+        off = float(np.linalg.norm(c - asset.part_centers[p].astype(np.float64)))
+        if not off <= tol.GUIDE_RELATIVE * size:
+            problems.append(f"UsdSkel puts its centre {off:.4g} from the part's centre {asset.part_centers[p].tolist()} "
+                            f"(joint space)")
+        elif not np.abs(m[:3, :3] - np.eye(3)).max() <= tol.GUIDE_RELATIVE:
+            problems.append("its geomBindTransform turns or scales it in its joint's space (inv(bind) @ geomBind "
+                            "is not a translation)")
+        if problems:
+            yield hit(f"part {p} (joint {joint!r}): guide sphere {where}: " + "; ".join(problems),
+                      prim=where, part=p, joint=joint)
+    missing = [p for p in range(P) if p not in seen]
+    if missing:
+        yield hit(f"{len(missing)} of {P} parts have no guide sphere (a UsdGeom.Sphere under the SkelRoot with "
+                  f"customData {schema.GUIDE_PART_KEY}), first part {missing[0]} (joint "
+                  f"{asset.part_joints[missing[0]]!r}): other USD tools cannot show it",
+                  part=missing[0], joint=asset.part_joints[missing[0]], count=len(missing))

@@ -13,7 +13,9 @@ from ...errors import InputError
 from ...tolerances import DEGENERATE_RATIO, LARGEST_COORDINATE
 from ...xforms import degenerate
 
-INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
+#: a channel's interpolation between keys: glTF's three, and ``NLERP`` (translation and scale
+#: linear, rotation by normalised lerp along the shortest path: Ogre's default ``RIM_LINEAR``)
+INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE", "NLERP")
 
 
 @dataclass

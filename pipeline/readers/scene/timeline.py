@@ -57,6 +57,11 @@ def sample_channel(ch: Channel, seconds: np.ndarray, key_tolerance: float = 0.0)
         if ch.path == "r":  # tangents that cancel the value would divide by zero: hold the key there
             n = np.linalg.norm(res, axis=1, keepdims=True)
             res = np.where(n > 1e-12, res / np.where(n > 1e-12, n, 1.0), vals[i])
+    elif ch.path == "r" and ch.interpolation == "NLERP":  # Ogre's RIM_LINEAR: lerp, shortest path, normalise
+        b = np.where((np.sum(vals[i] * vals[i + 1], axis=1) < 0)[:, None], -vals[i + 1], vals[i + 1])
+        res = vals[i] + (b - vals[i]) * u[:, None]
+        n = np.linalg.norm(res, axis=1, keepdims=True)
+        res = np.where(n > 1e-12, res / np.where(n > 1e-12, n, 1.0), vals[i])
     elif ch.path == "r":
         res = slerp(vals[i], vals[i + 1], u)
     else:
