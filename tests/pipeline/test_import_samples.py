@@ -553,3 +553,29 @@ def test_weld_merges_vertices_only_where_their_blend_shape_offsets_agree():
     a = skin_points(m, np.eye(4)[None], [1.0])
     b = skin_points(out, np.eye(4)[None], [1.0])
     assert {tuple(np.round(x, 6)) for x in a} == {tuple(np.round(x, 6)) for x in b}
+
+
+def test_proxy_of_a_blend_shape_rig_names_the_shapes_not_carried_with_their_bound(tmp_path):
+    """--target-faces on a mesh with blend shapes: the proxy does not carry them yet, so they are
+    one not-carried record with the bound of what they move (the largest sum of a vertex's shape
+    displacements over the clip), the asset binds none, and --strict refuses."""
+    import json
+
+    from click.testing import CliRunner
+    from pxr import Usd, UsdSkel
+    from colossus.cli import main
+
+    src = _shape_source(tmp_path / "shapes.usda")
+    out = tmp_path / "proxy.usda"
+    r = CliRunner().invoke(main, ["import", str(src), "-o", str(out), "--target-faces", "120", "--json"],
+                           prog_name="colossus")
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)
+    (item,) = [x for x in s["not_carried"] if x["what"] == "morph_targets"]
+    assert sorted(item["where"]) == ["bulge", "twist"] and 0.01 < item["bound_relative"] < 1.0
+    st = Usd.Stage.Open(str(out))
+    assert not any(p.IsA(UsdSkel.BlendShape) for p in st.Traverse())
+    r = CliRunner().invoke(main, ["import", str(src), "-o", str(tmp_path / "strict.usda"), "--target-faces", "120",
+                                  "--strict"], prog_name="colossus")
+    assert r.exit_code != 0 and "morph_targets" in r.output + (r.stderr if r.stderr_bytes else "")
+    assert not (tmp_path / "strict.usda").exists()
