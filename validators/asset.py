@@ -352,21 +352,10 @@ class LoadedAsset:
 
         if self.parents is None or self.rest is None or not len(c.times):
             return None
-        name = lambda j: self.joints[d.anim_to_skel[j]]
-        if d.vs.size:
-            with np.errstate(invalid="ignore"):
-                tiny = np.abs(d.vs) < tol.MIN_SCALE
-                flips = (np.sign(d.vs[1:]) * np.sign(d.vs[:-1])) < 0
-            if tiny.any():
-                i, j, _ = np.argwhere(tiny)[0]
-                v = float(d.vs[i, j][np.argmax(tiny[i, j])])
-                return ("scales", float(d.ts[i]), "singular",
-                        (name(j), f"has a scale of {v:g} on an axis: no inverse (a scale below 2^-22 counts as 0)"))
-            if flips.any():
-                i, j, _ = np.argwhere(flips)[0]
-                return ("scales", float(d.ts[i]), "singular",
-                        (name(j), f"has a scale that changes sign between times {d.ts[i]:g} and {d.ts[i + 1]:g} "
-                                  "(UsdSkel interpolates it through 0)"))
+        bad_scale = schema.scale_singularity(d, tol.MIN_SCALE)
+        if bad_scale is not None:
+            t, j, why = bad_scale
+            return ("scales", t, "singular", (self.joints[d.anim_to_skel[j]], why))
         times = np.asarray(c.times, dtype=np.float64)
         for lo in range(0, len(times), 256):
             with np.errstate(invalid="ignore", over="ignore", divide="ignore"):

@@ -27,9 +27,8 @@ BIND_REST_RELATIVE = 1e-4
 #: A bind transform is invertible when |det| of its 3x3 part exceeds this (and so are a rest
 #: transform and a joint's posed transform on a clip's frame, COL312 / COL509).
 MIN_DETERMINANT = 1e-12
-#: An animated scale whose magnitude on an axis is below this counts as zero (COL509): between
-#: two samples UsdSkel lerps scales in half precision, which can round such a scale to exactly 0
-#: (a few of half's smallest subnormal steps, 2^-24).
+#: An animated scale whose magnitude on an axis is below this counts as zero (COL509;
+#: :data:`runtime.schema.MIN_SCALE`, the importer's limit too).
 MIN_SCALE = 2.0 ** -22
 #: Time codes are integers within this.
 TIME_CODE_EPS = 1e-6
