@@ -1,4 +1,4 @@
-"""Exact minimal enclosing sphere of a 3-D point set (numpy and plain Python: nothing to compile).
+"""Exact minimal enclosing sphere of a 3-D point set (numpy, and one numba kernel for the core-set loop).
 
 Method (an iterative core-set scheme, after Gärtner's "Fast and robust smallest enclosing balls"
 and the usual Welzl nested loop):
@@ -15,10 +15,13 @@ and the usual Welzl nested loop):
 4. when no point is outside, the returned radius is the exact (float64) largest distance from the
    centre to any input point, so containment holds even when the tolerance let a point slip.
 
-Step 3 touches every point once per iteration (typically 2-5 iterations), so the cost is a few
-numpy passes.  The module used to be numba kernels (19 of them, about 30 s to compile on a cold
-cache, most of a new user's first import); numpy is as fast for the point counts the spheres
-stage sees.
+Step 3 touches every point once per iteration (typically 2-5 iterations).  Step 1 is numpy
+(BLAS); steps 2-4 are one numba kernel (:mod:`pipeline.geometry._minsphere_kernels`), ported
+operation for operation from the plain-Python form kept here as :func:`_core_sphere_python`
+(bit-identical: a test checks it).  Why: the spheres stage solves ~3,800 spheres of a few thousand
+points on the 200,000-triangle benchmark, and interpreter overhead on the small core sets and the
+per-call numpy passes made that ~14 s of the import.  The module once held 19 numba kernels
+(about 30 s to compile on a cold cache); the one loop kernel compiles in ~2 s, once per machine.
 
 :func:`min_sphere` and :func:`min_spheres` validate their input; :func:`largest_min_sphere`
 gives the largest of the per-set minimal radii exactly while solving only the sets that can be
@@ -31,6 +34,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from colossus.pipeline.geometry._minsphere_kernels import _core_loop
 
 #: Initial core-set directions (both ends of each are used).
 _DIRS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [1, 1, -1], [1, -1, 1], [-1, 1, 1]], dtype=np.float64)
@@ -168,7 +173,17 @@ def _sqdist(P, c) -> np.ndarray:
 def _core_sphere(P, hint=()) -> tuple[np.ndarray, float, list]:
     """Minimal sphere of ``P`` (n >= 1, 3) float32/float64, finite -> (centre (3,), radius, the
     core points on its boundary).  ``hint``: indices to add to the first core set (e.g. the
-    boundary points of a similar set's sphere: fewer iterations)."""
+    boundary points of a similar set's sphere: fewer iterations).  Step 1 here (BLAS), steps 2-4
+    in one numba kernel (:func:`pipeline.geometry._minsphere_kernels._core_loop`), bit-identical
+    to :func:`_core_sphere_python`."""
+    core = np.array(_first_core(P, hint), dtype=np.int64)
+    c, r, on = _core_loop(P if P.flags.c_contiguous else np.ascontiguousarray(P), core)
+    return c, r, on.tolist()
+
+
+def _first_core(P, hint=()) -> list:
+    """Step 1: the extreme points of ``P`` along :data:`_DIRS`, after the ``hint`` indices
+    (distinct, in that order)."""
     n = len(P)
     ext = []  # per block: the indices of its smallest and largest projections, and their values
     for s in range(0, n, _BLOCK):
@@ -177,7 +192,14 @@ def _core_sphere(P, hint=()) -> tuple[np.ndarray, float, list]:
         ext.append((lo + s, hi + s, proj[np.arange(7), lo], proj[np.arange(7), hi]))
     lo_i, hi_i, lo_v, hi_v = (np.array([e[k] for e in ext]) for k in range(4))
     k = np.arange(7)
-    core = list(dict.fromkeys(list(hint) + np.r_[lo_i[lo_v.argmin(0), k], hi_i[hi_v.argmax(0), k]].tolist()))
+    return list(dict.fromkeys(list(hint) + np.r_[lo_i[lo_v.argmin(0), k], hi_i[hi_v.argmax(0), k]].tolist()))
+
+
+def _core_sphere_python(P, hint=()) -> tuple[np.ndarray, float, list]:
+    """:func:`_core_sphere` in plain Python and numpy, the form the kernel was ported from (kept
+    as its reference: ``tests/pipeline/test_stages_geometry.py`` checks they agree bit for bit)."""
+    n = len(P)
+    core = _first_core(P, hint)
     o = P[core[0]].astype(np.float64)
     nch = min(_CHUNKS, n)
     bounds = [c * n // nch for c in range(nch + 1)]
