@@ -166,6 +166,82 @@ def _boundary(P, core, nc, o, c, r2, out):
 
 
 @njit(cache=True, fastmath=FASTMATH_OFF)
+def _first_core(P, hint):
+    """Step 1: the ``hint`` indices, then the points of ``P`` (n, 3) with the smallest and the
+    largest projection on each of minsphere's 7 directions (the first such point in index
+    order), without repeats, in that order (int64 array).
+
+    The directions' components are 0 and +-1, so each projection ``(d0 x + d1 y) + d2 z`` is
+    exact but for the two additions, summed in the order a matrix product sums them
+    (minsphere's Python form computes the projections with BLAS; a test checks the cores agree)."""
+    n = P.shape[0]
+    lo_v = np.full(7, np.inf)
+    hi_v = np.full(7, -np.inf)
+    lo_i = np.zeros(7, np.int64)
+    hi_i = np.zeros(7, np.int64)
+    for i in range(n):
+        x, y, z = np.float64(P[i, 0]), np.float64(P[i, 1]), np.float64(P[i, 2])
+        for k in range(7):
+            if k == 0:
+                v = x
+            elif k == 1:
+                v = y
+            elif k == 2:
+                v = z
+            elif k == 3:
+                v = (x + y) + z
+            elif k == 4:
+                v = (x + y) - z
+            elif k == 5:
+                v = (x - y) + z
+            else:
+                v = (y - x) + z
+            if v < lo_v[k]:
+                lo_v[k], lo_i[k] = v, i
+            if v > hi_v[k]:
+                hi_v[k], hi_i[k] = v, i
+    out = np.empty(len(hint) + 14, np.int64)
+    m = 0
+    for t in range(len(hint) + 14):
+        if t < len(hint):
+            i = hint[t]
+        elif t < len(hint) + 7:
+            i = lo_i[t - len(hint)]
+        else:
+            i = hi_i[t - len(hint) - 7]
+        seen = False
+        for u in range(m):
+            if out[u] == i:
+                seen = True
+                break
+        if not seen:
+            out[m] = i
+            m += 1
+    return out[:m]
+
+
+@njit(cache=True, fastmath=FASTMATH_OFF)
+def _farthest2(P, c):
+    """Largest squared distance ``(dx^2 + dy^2) + dz^2`` (float64) from ``c`` (3,) to a row of ``P``."""
+    best = 0.0
+    for i in range(P.shape[0]):
+        dx = np.float64(P[i, 0]) - c[0]
+        dy = np.float64(P[i, 1]) - c[1]
+        dz = np.float64(P[i, 2]) - c[2]
+        d = dx * dx + dy * dy + dz * dz
+        if d > best:
+            best = d
+    return best
+
+
+@njit(cache=True, fastmath=FASTMATH_OFF)
+def _core_sphere(P, hint):
+    """Minimal sphere of ``P`` (n, 3): minsphere's steps 1-4, starting from the ``hint`` indices
+    (int64, distinct).  Returns ``(centre (3,) float64, radius, boundary indices)``."""
+    return _core_loop(P, _first_core(P, hint))
+
+
+@njit(cache=True, fastmath=FASTMATH_OFF)
 def _core_loop(P, core0):
     """Steps 2-4 of minsphere's method from the first core set ``core0`` (int64, distinct
     indices into ``P`` (n, 3)).  Returns ``(centre (3,) float64, radius, boundary indices)``."""

@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-from colossus.pipeline.geometry._minsphere_kernels import _core_loop
+from colossus.pipeline.geometry import _minsphere_kernels as K
 
 #: Initial core-set directions (both ends of each are used).
 _DIRS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [1, 1, -1], [1, -1, 1], [-1, 1, 1]], dtype=np.float64)
@@ -173,11 +173,10 @@ def _sqdist(P, c) -> np.ndarray:
 def _core_sphere(P, hint=()) -> tuple[np.ndarray, float, list]:
     """Minimal sphere of ``P`` (n >= 1, 3) float32/float64, finite -> (centre (3,), radius, the
     core points on its boundary).  ``hint``: indices to add to the first core set (e.g. the
-    boundary points of a similar set's sphere: fewer iterations).  Step 1 here (BLAS), steps 2-4
-    in one numba kernel (:func:`pipeline.geometry._minsphere_kernels._core_loop`), bit-identical
-    to :func:`_core_sphere_python`."""
-    core = np.array(_first_core(P, hint), dtype=np.int64)
-    c, r, on = _core_loop(P if P.flags.c_contiguous else np.ascontiguousarray(P), core)
+    boundary points of a similar set's sphere: fewer iterations).  One numba kernel
+    (:func:`pipeline.geometry._minsphere_kernels._core_sphere`), bit-identical to
+    :func:`_core_sphere_python`."""
+    c, r, on = K._core_sphere(P if P.flags.c_contiguous else np.ascontiguousarray(P), np.array(hint, dtype=np.int64))
     return c, r, on.tolist()
 
 
@@ -311,10 +310,11 @@ def largest_min_sphere(points: np.ndarray, center=None, rel: float = 0.0) -> flo
     """
     p = _as_points(points, 3, "largest_min_sphere points")
     mid = 0.5 * (p.min(1).astype(np.float64) + p.max(1).astype(np.float64))
-    upper = np.array([_sqdist(p[f], mid[f]).max() for f in range(len(p))])
+    p = p if p.flags.c_contiguous else np.ascontiguousarray(p)
+    upper = np.array([K._farthest2(p[f], mid[f]) for f in range(len(p))])  # = _sqdist(p[f], mid[f]).max()
     if center is not None:
         c = np.asarray(center, dtype=np.float64).reshape(3)
-        upper = np.minimum(upper, [_sqdist(p[f], c).max() for f in range(len(p))])
+        upper = np.minimum(upper, [K._farthest2(p[f], c) for f in range(len(p))])
     upper = np.sqrt(upper) * (1 + 1e-12)
     best = -1.0
     hint = []

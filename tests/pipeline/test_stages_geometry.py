@@ -398,7 +398,12 @@ def test_min_sphere_kernel_bit_identical_to_python_form():
     sets += [np.tile([[1.0, 2.0, 3.0]], (50, 1)), np.concatenate([ring, ring + [0, 0, 1]]), ring * 1e3 + 7.0,
              np.concatenate([[[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]] * 5).astype(float),
              np.c_[np.linspace(0, 1, 50), np.zeros(50), np.zeros(50)], rng.normal(size=(2000, 3)) * [1, 1e-9, 1]]
+    big = rng.normal(size=(200_000, 3)) * [1.0, 3.0, 0.5]
+    sets += [big, np.round(big, 1), np.round(big, 1).astype(np.float32)]  # many ties in the projections
     for k, p in enumerate(sets):
+        hint = np.array([len(p) // 2], np.int64)
+        assert K._first_core(p, hint).tolist() == M._first_core(p, hint.tolist()), k
+        assert K._farthest2(p, np.array([0.1, 0.2, 0.3])) == M._sqdist(p, [0.1, 0.2, 0.3]).max(), k
         b = M._core_sphere_python(p)
         for hint in ((), b[2]):
             a = M._core_sphere(p, hint)
