@@ -21,7 +21,9 @@ operation for operation from the plain-Python form kept here as :func:`_core_sph
 (bit-identical: a test checks it).  Why: the spheres stage solves ~3,800 spheres of a few thousand
 points on the 200,000-triangle benchmark, and interpreter overhead on the small core sets and the
 per-call numpy passes made that ~14 s of the import.  The module once held 19 numba kernels
-(about 30 s to compile on a cold cache); the one loop kernel compiles in ~2 s, once per machine.
+(about 30 s to compile on a cold cache); the loop kernel still costs ~4-7 s of CPU to compile
+once per machine, so it runs only where the work pays for it (:data:`KERNEL_MIN`): small imports
+keep the plain-Python form and compile nothing.
 
 :func:`min_sphere` and :func:`min_spheres` validate their input; :func:`largest_min_sphere`
 gives the largest of the per-set minimal radii exactly while solving only the sets that can be
@@ -51,6 +53,12 @@ _COPLANAR = 1e-10
 _CHUNKS = 16
 #: Rows per block of the distance pass (bounds the float64 temporaries to ~24 MB).
 _BLOCK = 1 << 20
+#: From this many points (summed over the sets of one call, or over the whole spheres stage: its
+#: ``compiled`` argument) the core-set loop runs compiled.  The kernel costs ~4-7 s of CPU to
+#: compile once per machine, the plain-Python form ~0.25 us per point: a demo-sized import (the
+#: samples, the cold-start rows) never compiles it; a 200,000-triangle or a 1,000-frame character
+#: (10-25 M points over its poses) does, and saves 10 s and more of every import after.
+KERNEL_MIN = 8_000_000
 #: Safety cap on core-set iterations (each adds at least one new point, so it is never reached
 #: in practice; if it were, containment still holds, only minimality would suffer).
 _MAX_ITER = 200
@@ -170,12 +178,20 @@ def _sqdist(P, c) -> np.ndarray:
     return out
 
 
-def _core_sphere(P, hint=()) -> tuple[np.ndarray, float, list]:
+def _compiled(points, compiled) -> bool:
+    """Whether to run the kernel: ``compiled`` when given, else whether ``points`` holds at least
+    :data:`KERNEL_MIN` points."""
+    return bool(compiled) if compiled is not None else points.size >= 3 * KERNEL_MIN
+
+
+def _core_sphere(P, hint=(), compiled=True) -> tuple[np.ndarray, float, list]:
     """Minimal sphere of ``P`` (n >= 1, 3) float32/float64, finite -> (centre (3,), radius, the
     core points on its boundary).  ``hint``: indices to add to the first core set (e.g. the
     boundary points of a similar set's sphere: fewer iterations).  One numba kernel
     (:func:`pipeline.geometry._minsphere_kernels._core_sphere`), bit-identical to
-    :func:`_core_sphere_python`."""
+    :func:`_core_sphere_python` (which runs instead when ``compiled`` is false)."""
+    if not compiled:
+        return _core_sphere_python(P, hint)
     c, r, on = K._core_sphere(P if P.flags.c_contiguous else np.ascontiguousarray(P), np.array(hint, dtype=np.int64))
     return c, r, on.tolist()
 
@@ -251,12 +267,14 @@ def _as_points(points, ndim: int, what: str) -> np.ndarray:
     return p
 
 
-def min_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
+def min_sphere(points: np.ndarray, compiled: bool | None = None) -> tuple[np.ndarray, float]:
     """Minimal enclosing sphere of a point set.
 
     Parameters
     ----------
     points : (n, 3) float32 or float64, n >= 1, finite.
+    compiled : run the numba kernel (True) or the plain-Python form (False), bit-identical
+        results; default: the kernel from :data:`KERNEL_MIN` points.
 
     Returns
     -------
@@ -265,7 +283,8 @@ def min_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
         The largest float64 distance from ``center`` to a point, so every point is contained;
         it exceeds the exact minimal radius by at most about ``1e-9`` relative.
     """
-    c, r, _ = _core_sphere(_as_points(points, 2, "min_sphere points"))
+    p = _as_points(points, 2, "min_sphere points")
+    c, r, _ = _core_sphere(p, (), _compiled(p, compiled))
     return c, float(r)
 
 
@@ -284,12 +303,13 @@ def min_spheres(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     p = _as_points(points, 3, "min_spheres points")
     centers = np.zeros((len(p), 3))
     radii = np.zeros(len(p))
+    compiled = _compiled(p, None)
     for f in range(len(p)):
-        centers[f], radii[f], _ = _core_sphere(p[f])
+        centers[f], radii[f], _ = _core_sphere(p[f], (), compiled)
     return centers, radii
 
 
-def largest_min_sphere(points: np.ndarray, center=None, rel: float = 0.0) -> float:
+def largest_min_sphere(points: np.ndarray, center=None, rel: float = 0.0, compiled: bool | None = None) -> float:
     """The largest of the minimal enclosing radii of ``F`` point sets, ``max_f min_sphere(points[f])``
     (exactly, or at most ``rel`` relative below it), solving only the sets that can be the
     largest.
@@ -307,20 +327,23 @@ def largest_min_sphere(points: np.ndarray, center=None, rel: float = 0.0) -> flo
     points : (F, n, 3) float32 or float64, F >= 1, n >= 1, finite.
     center : (3,), optional
     rel : float >= 0
+    compiled : as :func:`min_sphere`'s (default: the kernel from :data:`KERNEL_MIN` points in all).
     """
     p = _as_points(points, 3, "largest_min_sphere points")
+    compiled = _compiled(p, compiled)
     mid = 0.5 * (p.min(1).astype(np.float64) + p.max(1).astype(np.float64))
     p = p if p.flags.c_contiguous else np.ascontiguousarray(p)
-    upper = np.array([K._farthest2(p[f], mid[f]) for f in range(len(p))])  # = _sqdist(p[f], mid[f]).max()
+    far2 = K._farthest2 if compiled else (lambda q, c: _sqdist(q, c).max())  # the same float64 values
+    upper = np.array([far2(p[f], mid[f]) for f in range(len(p))])
     if center is not None:
         c = np.asarray(center, dtype=np.float64).reshape(3)
-        upper = np.minimum(upper, [K._farthest2(p[f], c) for f in range(len(p))])
+        upper = np.minimum(upper, [far2(p[f], c) for f in range(len(p))])
     upper = np.sqrt(upper) * (1 + 1e-12)
     best = -1.0
     hint = []
     for f in np.argsort(-upper, kind="stable"):
         if upper[f] <= best * (1.0 + rel):
             break
-        _, r, hint = _core_sphere(p[f], hint)  # the sets are alike: start from the last boundary
+        _, r, hint = _core_sphere(p[f], hint, compiled)  # the sets are alike: start from the last boundary
         best = max(best, r)
     return best
