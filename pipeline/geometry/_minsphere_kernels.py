@@ -175,8 +175,10 @@ def _first_core(P, hint):
     exact but for the two additions, summed in the order a matrix product sums them
     (minsphere's Python form computes the projections with BLAS; a test checks the cores agree)."""
     n = P.shape[0]
-    lo_v = np.full(7, np.inf)
-    hi_v = np.full(7, -np.inf)
+    lo_v = np.empty(7)
+    hi_v = np.empty(7)
+    for k in range(7):
+        lo_v[k], hi_v[k] = np.inf, -np.inf
     lo_i = np.zeros(7, np.int64)
     hi_i = np.zeros(7, np.int64)
     for i in range(n):
@@ -249,7 +251,8 @@ def _core_loop(P, core0):
     cap = len(core0) + _CHUNKS * (_MAX_ITER + 1)
     core = np.empty(cap, np.int64)
     nc = len(core0)
-    core[:nc] = core0
+    for t in range(nc):  # element loops, not slice assignments: those compile a shape-error path (~2 s)
+        core[t] = core0[t]
     on = np.empty(cap, np.int64)
     o = (np.float64(P[core[0], 0]), np.float64(P[core[0], 1]), np.float64(P[core[0], 2]))
     nch = min(_CHUNKS, n)
@@ -308,6 +311,7 @@ def _core_loop(P, core0):
         if added == 0:  # numerically stuck: the radius below still covers every point
             break
         nc = m + added
-        core[:nc] = on[:nc]
+        for t in range(nc):
+            core[t] = on[t]
     m = _boundary(P, core, nc, o, c, r2, on)
     return np.array([ctr[0], ctr[1], ctr[2]]), math.sqrt(max(r2, maxd2)), on[:m].copy()

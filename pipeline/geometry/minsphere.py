@@ -21,7 +21,7 @@ operation for operation from the plain-Python form kept here as :func:`_core_sph
 (bit-identical: a test checks it).  Why: the spheres stage solves ~3,800 spheres of a few thousand
 points on the 200,000-triangle benchmark, and interpreter overhead on the small core sets and the
 per-call numpy passes made that ~14 s of the import.  The module once held 19 numba kernels
-(about 30 s to compile on a cold cache); the loop kernel still costs ~4-7 s of CPU to compile
+(about 30 s to compile on a cold cache); the loop kernel still costs ~3-5 s of CPU to compile
 once per machine, so it runs only where the work pays for it (:data:`KERNEL_MIN`): small imports
 keep the plain-Python form and compile nothing.
 
@@ -54,7 +54,7 @@ _CHUNKS = 16
 #: Rows per block of the distance pass (bounds the float64 temporaries to ~24 MB).
 _BLOCK = 1 << 20
 #: From this many points (summed over the sets of one call, or over the whole spheres stage: its
-#: ``compiled`` argument) the core-set loop runs compiled.  The kernel costs ~4-7 s of CPU to
+#: ``compiled`` argument) the core-set loop runs compiled.  The kernel costs ~3-5 s of CPU to
 #: compile once per machine, the plain-Python form ~0.25 us per point: a demo-sized import (the
 #: samples, the cold-start rows) never compiles it; a 200,000-triangle or a 1,000-frame character
 #: (10-25 M points over its poses) does, and saves 10 s and more of every import after.
