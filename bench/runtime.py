@@ -217,6 +217,24 @@ def game_frame(col, clip, seed=0):
     return frame
 
 
+def first_frame(path, clip=None):
+    """A game's first frame in this process, as the cold-start rows time it (``colossus bench
+    --only coldstart``: a new process, cold or warm numba cache): load the collider at ``path``,
+    pose it at a time between two frames of ``clip`` (default its first), one player sphere
+    contact query and 16 rays (:func:`game_frame_queries`).  Returns the number of contacts."""
+    from colossus.runtime.collider import load_collider
+
+    col = load_collider(path)
+    clip = col.clips[0] if clip is None else clip
+    times = col.frame_times(clip)
+    pose = col.pose(clip, 0.5 * float(times[len(times) // 2] + times[len(times) // 2 + 1]))
+    player, r, o, dirs = game_frame_queries(pose, col.size(), np.random.default_rng(0))
+    n = len(pose.sphere_contacts(player, r))
+    pose.raycast(o[:8], dirs[:8], 2 * r)
+    pose.raycast(o[8:], dirs[8:])
+    return n
+
+
 def run_bench(path=None, repeat=50):
     """Run the three benchmarks; returns rows of dicts ``name, ours_s, baseline_s, speedup,
     goal, met, note`` (times in seconds, this machine's)."""
@@ -457,5 +475,25 @@ def format_rows(rows) -> str:
     return "\n".join(lines)
 
 
+def precompile_first_frame(path=None):
+    """Compile (into numba's on-disk cache) every kernel a game's first frame needs, by running
+    :func:`first_frame` on ``path`` (default: the synthetic centipede, written to a temporary
+    folder).  ``make setup`` runs it once, so a new install's first frame loads its kernels
+    instead of compiling them (~10 s of CPU).  One compile serves every character: the runtime
+    normalises its arrays' dtypes at load, so the kernels' signatures do not depend on the asset
+    (checked: after this, the corpus characters' first frames compile nothing).  Where the
+    package folder is read-only numba keeps its cache in the user's cache folder instead
+    (``NUMBA_CACHE_DIR`` overrides both)."""
+    if path is not None:
+        return first_frame(path)
+    with tempfile.TemporaryDirectory() as tmp:
+        return first_frame(make_bench_asset(os.path.join(tmp, "centipede.usda")))
+
+
 if __name__ == "__main__":  # pragma: no cover
-    print(format_rows(run_bench()))
+    import sys
+
+    if sys.argv[1:2] == ["first-frame"]:  # make setup: python -m colossus.bench.runtime first-frame [asset]
+        precompile_first_frame(*sys.argv[2:3])
+    else:
+        print(format_rows(run_bench()))

@@ -297,7 +297,8 @@ def format_bench(res: dict) -> str:
 
 def coldstart(echo=print, repeat: int = 1) -> dict:
     """Cold and warm times of a new user's first ``colossus import samples/creature.glb``,
-    ``colossus validate`` of the result and ``load_collider`` + one pose's points.
+    ``colossus validate`` of the result, ``load_collider`` + one pose's points, and a game's first
+    frame (:func:`bench.runtime.first_frame`: load, pose, 1 sphere contact query, 16 rays).
 
     Each command runs in a fresh process.  Cold: ``NUMBA_CACHE_DIR`` pointed at a new empty
     folder for that command alone (so no command profits from another's compiling); warm: the
@@ -318,8 +319,11 @@ def coldstart(echo=print, repeat: int = 1) -> dict:
         cmds = {
             "import": [sys.executable, "-m", "colossus", "import", sample, "-o", asset],
             "validate": [sys.executable, "-m", "colossus", "validate", asset],
-            "load_collider + pose": [sys.executable, "-c", "import sys; from runtime import load_collider; "
+            "load_collider + pose": [sys.executable, "-c", "import sys; from colossus.runtime import load_collider; "
                                      "load_collider(sys.argv[1]).pose('walk', 3.5).points", asset],
+            # issue 22 item 4: load, pose, 1 sphere contact query, 16 rays (goal: CPU <= 5 s cold, <= 1.5 s warm)
+            "first game frame": [sys.executable, "-c", "import sys; from colossus.bench.runtime import first_frame; "
+                                 "first_frame(sys.argv[1])", asset],
         }
         for k in range(repeat):
             for name, cmd in cmds.items():
@@ -340,8 +344,12 @@ def coldstart(echo=print, repeat: int = 1) -> dict:
         ok = all(v[2] == 0 for v in vals)
         out[key] = {"wall": min(w), "cpu": min(c), "wall_max": max(w), "cpu_max": max(c), "ok": ok}
         rng = (lambda xs: f"{min(xs):6.2f}" if len(xs) == 1 else f"{min(xs):6.2f}-{max(xs):.2f}")
-        echo(f"  {key:<27} wall {rng(w)} s, CPU {rng(c)} s{'' if ok else '  (FAILED)'}"
-             + (f"   goal < 5 s: {'met' if min(w) < 5 else 'NOT met'}" if key.endswith("cold") else ""))
+        if key.startswith("first game frame"):  # its goal is in CPU seconds (the machine may be shared)
+            goal = 5.0 if key.endswith("cold") else 1.5
+            note = f"   goal CPU <= {goal:g} s: {'met' if min(c) <= goal else 'NOT met'}"
+        else:
+            note = f"   goal < 5 s: {'met' if min(w) < 5 else 'NOT met'}" if key.endswith("cold") else ""
+        echo(f"  {key:<27} wall {rng(w)} s, CPU {rng(c)} s{'' if ok else '  (FAILED)'}" + note)
     return out
 
 

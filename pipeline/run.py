@@ -361,6 +361,15 @@ def _spheres(mesh, src):
     kept in tests/pipeline/test_bad_input.py)."""
     import warnings
 
+    from colossus.runtime.schema import scale_singularity
+
+    for clip in mesh.stored_clips:  # a pose with no inverse, between frames too: the proof has no joint space
+        bad = scale_singularity(clip)
+        if bad is not None:
+            t, j, why = bad
+            raise InputError(src, f"clip {clip.name!r} time {t:g}: joint "
+                                  f"{mesh.joint_names[int(clip.anim_to_skel[j])]!r} {why}, so its transform is not "
+                                  "invertible as stored; corrupt or hostile file?")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:

@@ -375,8 +375,8 @@ def _read(path):
     from .references import layer_references
     try:
         refs = layer_references(path)
-    except Exception:
-        refs = []
+    except Exception as e:  # never composed: usd-core follows what it parsed of a broken layer
+        raise ColliderError(f"not a readable USD file ({' '.join(str(e).split())[:200]})") from None
     if refs:  # a collider is one self-contained layer: nothing it names is opened
         raise ColliderError(f"names other files (a collider has no composition arcs), not read: {refs[0]!r}"
                             + (f" and {len(refs) - 1} more" if len(refs) > 1 else ""))

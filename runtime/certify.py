@@ -57,6 +57,22 @@ OMEGA_MARGIN = 1.001
 ALPHA_MARGIN = 1.01
 
 
+def _inv_or_nan(m):
+    """``inv(m)`` of (F, 4, 4) poses, NaN for a singular one: a joint squashed to nothing has no
+    space to measure a part in, so nothing there is ever certified (the validator refuses such
+    a pose first, COL518; this is the guard for what gets past it)."""
+    try:
+        return np.linalg.inv(m)
+    except np.linalg.LinAlgError:
+        out = np.full_like(m, np.nan, dtype=np.float64)
+        for k in range(len(m)):
+            try:
+                out[k] = np.linalg.inv(m[k])
+            except np.linalg.LinAlgError:
+                pass
+        return out
+
+
 @dataclass
 class Rig:
     """What the certificate reads of an asset (arrays; see :class:`runtime.asset.ColliderData`).
@@ -134,7 +150,7 @@ class Rig:
 
     def joint_space_mats(self, skel, joint) -> np.ndarray:
         """(F, J, 12) folded skinning transforms into joint ``joint``'s space at poses ``skel``."""
-        return SK.fold(np.linalg.inv(skel[:, joint])[:, None] @ skel @ self.inv_bind @ self.geom_bind)
+        return SK.fold(_inv_or_nan(skel[:, joint])[:, None] @ skel @ self.inv_bind @ self.geom_bind)
 
     def paths(self):
         """Per (part, joint) pair of the bounds: the chain of local transforms from the joint's

@@ -348,3 +348,31 @@ class Clip:
         return cls(name, name if path is None else path, times, f64(t), times, f64(q), times, f64(s),
                    np.arange(np.shape(t)[1], dtype=np.int64), times, tw=tw,
                    vw=w if w.shape[1] else np.zeros((0, 0)))
+
+
+#: An animated scale whose magnitude on an axis is below this counts as zero: between two
+#: samples UsdSkel lerps scales in half precision, which can round such a scale to exactly 0
+#: (a few of half's smallest subnormal steps, 2^-24).
+MIN_SCALE = 2.0 ** -22
+
+
+def scale_singularity(clip: Clip, min_scale: float = MIN_SCALE):
+    """Where the clip's scales leave a joint without an inverse pose, at a sample or between two
+    (UsdSkel lerps scales, so one that changes sign passes through 0): ``(time, animation joint
+    index, why)`` of the first such place, else None.  The frame proofs (the importer's and the
+    validator's) measure each part in its joint's space, the inverse of the joint's pose."""
+    vs = np.asarray(clip.vs, dtype=np.float64)
+    if not vs.size:
+        return None
+    with np.errstate(invalid="ignore"):
+        tiny = np.abs(vs) < min_scale
+        flips = (np.sign(vs[1:]) * np.sign(vs[:-1])) < 0
+    if tiny.any():
+        i, j, _ = np.argwhere(tiny)[0]
+        v = float(vs[i, j][np.argmax(tiny[i, j])])
+        return float(clip.ts[i]), int(j), f"has a scale of {v:g} on an axis: no inverse (a scale below 2^-22 counts as 0)"
+    if flips.any():
+        i, j, _ = np.argwhere(flips)[0]
+        return (float(clip.ts[i]), int(j), f"has a scale that changes sign between times {clip.ts[i]:g} and "
+                                           f"{clip.ts[i + 1]:g} (UsdSkel interpolates it through 0)")
+    return None

@@ -292,7 +292,8 @@ class LoadedAsset:
         """Every clip's malformed time samples: ``{clip name: [issue, ...]}`` where an issue is
         ``(attr, time, kind, detail)``, ``kind`` ``"length"`` (``detail``: the number of entries,
         not one per clip joint) or ``"nonfinite"`` (``detail``: the first bad joint's name), at
-        most one of each kind per attribute.
+        most one of each kind per attribute; a clip without those has at most one ``"singular"``
+        issue (``detail``: ``(joint, why)``, :meth:`_singular`).
 
         A well-formed clip is judged on :meth:`clip_data` (read once, shared with the frame
         proof); only a malformed one is scanned sample by sample to say where: ``UsdSkel``
@@ -316,6 +317,10 @@ class LoadedAsset:
                 over = self._overflow(c, d)
                 if over is not None:
                     issues.append(("composed transforms", over[0], "nonfinite", over[1]))
+            if not issues:
+                sing = self._singular(c, d)
+                if sing is not None:
+                    issues.append(sing)
             out[c.name] = issues
         return out
 
@@ -338,6 +343,38 @@ class LoadedAsset:
             if bad.any():
                 i, j = np.argwhere(bad)[0]
                 return float(times[lo + i]), self.joints[j]
+        return None
+
+    def _singular(self, c: Clip, d):
+        """The first place where a joint of clip ``c`` (its finite samples ``d``) has no inverse
+        pose, as an issue ``(attr, time, "singular", (joint, why))``, else None: a scale below
+        :data:`tolerances.MIN_SCALE` on an axis, a scale that changes sign between two samples
+        (UsdSkel lerps it through 0), or a skeleton-space transform on a frame whose 3x3 part has
+        |det| <= :data:`tolerances.MIN_DETERMINANT` or that is not affine (a singular or
+        non-affine rest transform of a joint the clip leaves unanimated, or a parent's).  The
+        frame proof works in each part joint's space, the inverse of its pose (fuzz campaign 12,
+        case 1781: a zero scale crashed it with ``LinAlgError: Singular matrix``)."""
+        from colossus.runtime.kernels import pose as PK
+
+        if self.parents is None or self.rest is None or not len(c.times):
+            return None
+        bad_scale = schema.scale_singularity(d, tol.MIN_SCALE)
+        if bad_scale is not None:
+            t, j, why = bad_scale
+            return ("scales", t, "singular", (self.joints[d.anim_to_skel[j]], why))
+        times = np.asarray(c.times, dtype=np.float64)
+        for lo in range(0, len(times), 256):
+            with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+                skel = self.skel_transforms(PK.locals_at(d, times[lo:lo + 256], self.rest))
+                det = np.abs(np.linalg.det(skel[..., :3, :3]))
+                affine = (np.abs(skel[..., 3, :] - (0.0, 0.0, 0.0, 1.0)) < 1e-9).all(axis=-1)
+                bad = ~((det > tol.MIN_DETERMINANT) & affine)
+            if bad.any():
+                i, j = np.argwhere(bad)[0]
+                why = (f"has a transform that is not invertible (|det| {det[i, j]:.3g}: a zero scale, its own "
+                       "or a parent's, or a singular rest transform)" if affine[i, j] else
+                       "has a transform that is not affine (a rest transform whose last row is not (0, 0, 0, 1))")
+                return ("composed transforms", float(times[lo + i]), "singular", (self.joints[j], why))
         return None
 
     def _scan_samples(self, c: Clip) -> list:
@@ -468,6 +505,8 @@ class LoadedAsset:
             return False, "joint weights are not finite"
         if np.any(np.abs(np.linalg.det(self.bind[:, :3, :3])) <= tol.MIN_DETERMINANT):
             return False, "a bind transform is not invertible"
+        if not np.all(np.abs(self.bind[:, 3] - (0.0, 0.0, 0.0, 1.0)) < 1e-9):  # COL307's test: a non-affine
+            return False, "a bind transform is not affine"  # one can be singular with an invertible 3x3
         if not np.all(np.isfinite(self.points)):
             return False, "points are not finite"
         return True, ""
@@ -522,9 +561,13 @@ class LoadedAsset:
                 self.clip_data(c)
         except ColliderError as e:
             return False, f"a clip cannot be read: {e}"
-        bad = [n for n, issues in self.clip_sample_issues.items() if issues]
+        bad = [(n, issues[0][2]) for n, issues in self.clip_sample_issues.items() if issues]
         if bad:
-            return False, f"clip {bad[0]!r} has joint transforms that are not finite (COL503)"
+            name, kind = bad[0]
+            what = {"length": "samples with the wrong number of joints (COL505)",
+                    "singular": "a joint transform that is not invertible (COL518)"}.get(
+                        kind, "joint transforms that are not finite (COL503)")
+            return False, f"clip {name!r} has {what}"
         return True, ""
 
     # -- the certificate's view ----------------------------------------------------------------

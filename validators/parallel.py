@@ -89,10 +89,10 @@ def _probe_read(path):
     from .runner import external_references
     try:  # parsed once: held while its references are listed and the stage is opened on it
         layer = open_layer(path)
-    except Exception:
-        layer = None
-    if external_references(path):
-        return None  # check_asset reports COL004 without opening the stage
+        if external_references(path):
+            return None  # check_asset reports COL004 without opening the stage
+    except Exception as e:  # a layer Sdf cannot parse is never composed (check_asset: COL001)
+        return OPEN_FAILED.format(one_line(e))
     try:
         stage = open_stage(path, layer)
     except Exception as e:
@@ -146,7 +146,10 @@ def unit_plan(path, kw):
 
 def _plan(path, kw):
     from .asset import LoadedAsset, open_stage
+    from .runner import external_references
     try:
+        if external_references(path):  # never composed: unit_check reports COL004 (or COL001)
+            return None
         asset = LoadedAsset(open_stage(path), path)
         if not asset.ready("proof")[0]:
             return None

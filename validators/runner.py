@@ -141,9 +141,11 @@ def check_asset(path_or_stage, select=None, ignore=None, severities=None, **opti
             return report
         try:  # parsed once: held while its references are listed and the stage is opened on it
             layer = open_layer(path)
-        except Exception:
-            layer = None  # opening the stage below reports why (COL001)
-        refs = external_references(path)
+            refs = external_references(path)
+        except Exception as e:  # not composed: usd-core composes what it parsed of a broken layer
+            add("COL001", OPEN_FAILED.format(one_line(e)))
+            report.sort()
+            return report
         if refs:  # read from the layer alone: nothing it names is opened
             shown = ", ".join(repr(r) for r in refs[:5]) + (f" (+{len(refs) - 5} more)" if len(refs) > 5 else "")
             add("COL004", f"names {len(refs)} other file(s), not read: {shown}")
@@ -252,14 +254,15 @@ def unreadable_report(path, message: str, select=None, ignore=None, severities=N
 
 
 def external_references(path) -> list:
-    """The asset paths the layer ``path`` names (:func:`runtime.references.layer_references`), or
-    ``[]`` when the layer cannot be parsed (opening it then reports COL001)."""
+    """The asset paths the layer ``path`` names (:func:`runtime.references.layer_references`).
+
+    Raises what usd-core raises on a layer it cannot parse: the caller reports that as ``COL001``
+    and never composes the layer, for ``Usd.Stage.Open`` composes what it did parse of a broken
+    text layer, sublayers included, before it fails (fuzz campaign 12, case 1193: a sublayer
+    naming a FIFO beside a broken asset hung ``validate``)."""
     from colossus.runtime.references import layer_references
 
-    try:
-        return layer_references(path)
-    except Exception:
-        return []
+    return layer_references(path)
 
 
 def require_passing(path) -> AssetReport:

@@ -27,8 +27,12 @@ SLACK_RATIO = 1.5
 #: Bind transforms agree with the composed rest transforms when every entry differs by at most
 #: this times (1 + the entry's magnitude), translations scaled by the model size.
 BIND_REST_RELATIVE = 1e-4
-#: A bind transform is invertible when |det| of its 3x3 part exceeds this.
+#: A bind transform is invertible when |det| of its 3x3 part exceeds this (and so are a rest
+#: transform and a joint's posed transform on a clip's frame, COL318 / COL518).
 MIN_DETERMINANT = 1e-12
+#: An animated scale whose magnitude on an axis is below this counts as zero (COL518;
+#: :data:`runtime.schema.MIN_SCALE`, the importer's limit too).
+MIN_SCALE = 2.0 ** -22
 #: Time codes are integers within this.
 TIME_CODE_EPS = 1e-6
 #: Frame-proof chunking: at most this many bytes of per-frame joint matrices at once.

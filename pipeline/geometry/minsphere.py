@@ -1,4 +1,4 @@
-"""Exact minimal enclosing sphere of a 3-D point set (numpy and plain Python: nothing to compile).
+"""Exact minimal enclosing sphere of a 3-D point set (numpy, and one numba kernel for the core-set loop).
 
 Method (an iterative core-set scheme, after Gärtner's "Fast and robust smallest enclosing balls"
 and the usual Welzl nested loop):
@@ -15,10 +15,15 @@ and the usual Welzl nested loop):
 4. when no point is outside, the returned radius is the exact (float64) largest distance from the
    centre to any input point, so containment holds even when the tolerance let a point slip.
 
-Step 3 touches every point once per iteration (typically 2-5 iterations), so the cost is a few
-numpy passes.  The module used to be numba kernels (19 of them, about 30 s to compile on a cold
-cache, most of a new user's first import); numpy is as fast for the point counts the spheres
-stage sees.
+Step 3 touches every point once per iteration (typically 2-5 iterations).  Step 1 is numpy
+(BLAS); steps 2-4 are one numba kernel (:mod:`pipeline.geometry._minsphere_kernels`), ported
+operation for operation from the plain-Python form kept here as :func:`_core_sphere_python`
+(bit-identical: a test checks it).  Why: the spheres stage solves ~3,800 spheres of a few thousand
+points on the 200,000-triangle benchmark, and interpreter overhead on the small core sets and the
+per-call numpy passes made that ~14 s of the import.  The module once held 19 numba kernels
+(about 30 s to compile on a cold cache); the loop kernel still costs ~3-5 s of CPU to compile
+once per machine, so it runs only where the work pays for it (:data:`KERNEL_MIN`): small imports
+keep the plain-Python form and compile nothing.
 
 :func:`min_sphere` and :func:`min_spheres` validate their input; :func:`largest_min_sphere`
 gives the largest of the per-set minimal radii exactly while solving only the sets that can be
@@ -31,6 +36,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from colossus.pipeline.geometry import _minsphere_kernels as K
 
 #: Initial core-set directions (both ends of each are used).
 _DIRS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1], [1, 1, -1], [1, -1, 1], [-1, 1, 1]], dtype=np.float64)
@@ -46,6 +53,12 @@ _COPLANAR = 1e-10
 _CHUNKS = 16
 #: Rows per block of the distance pass (bounds the float64 temporaries to ~24 MB).
 _BLOCK = 1 << 20
+#: From this many points (summed over the sets of one call, or over the whole spheres stage: its
+#: ``compiled`` argument) the core-set loop runs compiled.  The kernel costs ~3-5 s of CPU to
+#: compile once per machine, the plain-Python form ~0.25 us per point: a demo-sized import (the
+#: samples, the cold-start rows) never compiles it; a 200,000-triangle or a 1,000-frame character
+#: (10-25 M points over its poses) does, and saves 10 s and more of every import after.
+KERNEL_MIN = 8_000_000
 #: Safety cap on core-set iterations (each adds at least one new point, so it is never reached
 #: in practice; if it were, containment still holds, only minimality would suffer).
 _MAX_ITER = 200
@@ -165,10 +178,27 @@ def _sqdist(P, c) -> np.ndarray:
     return out
 
 
-def _core_sphere(P, hint=()) -> tuple[np.ndarray, float, list]:
+def _compiled(points, compiled) -> bool:
+    """Whether to run the kernel: ``compiled`` when given, else whether ``points`` holds at least
+    :data:`KERNEL_MIN` points."""
+    return bool(compiled) if compiled is not None else points.size >= 3 * KERNEL_MIN
+
+
+def _core_sphere(P, hint=(), compiled=True) -> tuple[np.ndarray, float, list]:
     """Minimal sphere of ``P`` (n >= 1, 3) float32/float64, finite -> (centre (3,), radius, the
     core points on its boundary).  ``hint``: indices to add to the first core set (e.g. the
-    boundary points of a similar set's sphere: fewer iterations)."""
+    boundary points of a similar set's sphere: fewer iterations).  One numba kernel
+    (:func:`pipeline.geometry._minsphere_kernels._core_sphere`), bit-identical to
+    :func:`_core_sphere_python` (which runs instead when ``compiled`` is false)."""
+    if not compiled:
+        return _core_sphere_python(P, hint)
+    c, r, on = K._core_sphere(P if P.flags.c_contiguous else np.ascontiguousarray(P), np.array(hint, dtype=np.int64))
+    return c, r, on.tolist()
+
+
+def _first_core(P, hint=()) -> list:
+    """Step 1: the extreme points of ``P`` along :data:`_DIRS`, after the ``hint`` indices
+    (distinct, in that order)."""
     n = len(P)
     ext = []  # per block: the indices of its smallest and largest projections, and their values
     for s in range(0, n, _BLOCK):
@@ -177,7 +207,14 @@ def _core_sphere(P, hint=()) -> tuple[np.ndarray, float, list]:
         ext.append((lo + s, hi + s, proj[np.arange(7), lo], proj[np.arange(7), hi]))
     lo_i, hi_i, lo_v, hi_v = (np.array([e[k] for e in ext]) for k in range(4))
     k = np.arange(7)
-    core = list(dict.fromkeys(list(hint) + np.r_[lo_i[lo_v.argmin(0), k], hi_i[hi_v.argmax(0), k]].tolist()))
+    return list(dict.fromkeys(list(hint) + np.r_[lo_i[lo_v.argmin(0), k], hi_i[hi_v.argmax(0), k]].tolist()))
+
+
+def _core_sphere_python(P, hint=()) -> tuple[np.ndarray, float, list]:
+    """:func:`_core_sphere` in plain Python and numpy, the form the kernel was ported from (kept
+    as its reference: ``tests/pipeline/test_stages_geometry.py`` checks they agree bit for bit)."""
+    n = len(P)
+    core = _first_core(P, hint)
     o = P[core[0]].astype(np.float64)
     nch = min(_CHUNKS, n)
     bounds = [c * n // nch for c in range(nch + 1)]
@@ -230,12 +267,14 @@ def _as_points(points, ndim: int, what: str) -> np.ndarray:
     return p
 
 
-def min_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
+def min_sphere(points: np.ndarray, compiled: bool | None = None) -> tuple[np.ndarray, float]:
     """Minimal enclosing sphere of a point set.
 
     Parameters
     ----------
     points : (n, 3) float32 or float64, n >= 1, finite.
+    compiled : run the numba kernel (True) or the plain-Python form (False), bit-identical
+        results; default: the kernel from :data:`KERNEL_MIN` points.
 
     Returns
     -------
@@ -244,7 +283,8 @@ def min_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
         The largest float64 distance from ``center`` to a point, so every point is contained;
         it exceeds the exact minimal radius by at most about ``1e-9`` relative.
     """
-    c, r, _ = _core_sphere(_as_points(points, 2, "min_sphere points"))
+    p = _as_points(points, 2, "min_sphere points")
+    c, r, _ = _core_sphere(p, (), _compiled(p, compiled))
     return c, float(r)
 
 
@@ -263,12 +303,13 @@ def min_spheres(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     p = _as_points(points, 3, "min_spheres points")
     centers = np.zeros((len(p), 3))
     radii = np.zeros(len(p))
+    compiled = _compiled(p, None)
     for f in range(len(p)):
-        centers[f], radii[f], _ = _core_sphere(p[f])
+        centers[f], radii[f], _ = _core_sphere(p[f], (), compiled)
     return centers, radii
 
 
-def largest_min_sphere(points: np.ndarray, center=None, rel: float = 0.0) -> float:
+def largest_min_sphere(points: np.ndarray, center=None, rel: float = 0.0, compiled: bool | None = None) -> float:
     """The largest of the minimal enclosing radii of ``F`` point sets, ``max_f min_sphere(points[f])``
     (exactly, or at most ``rel`` relative below it), solving only the sets that can be the
     largest.
@@ -286,19 +327,23 @@ def largest_min_sphere(points: np.ndarray, center=None, rel: float = 0.0) -> flo
     points : (F, n, 3) float32 or float64, F >= 1, n >= 1, finite.
     center : (3,), optional
     rel : float >= 0
+    compiled : as :func:`min_sphere`'s (default: the kernel from :data:`KERNEL_MIN` points in all).
     """
     p = _as_points(points, 3, "largest_min_sphere points")
+    compiled = _compiled(p, compiled)
     mid = 0.5 * (p.min(1).astype(np.float64) + p.max(1).astype(np.float64))
-    upper = np.array([_sqdist(p[f], mid[f]).max() for f in range(len(p))])
+    p = p if p.flags.c_contiguous else np.ascontiguousarray(p)
+    far2 = K._farthest2 if compiled else (lambda q, c: _sqdist(q, c).max())  # the same float64 values
+    upper = np.array([far2(p[f], mid[f]) for f in range(len(p))])
     if center is not None:
         c = np.asarray(center, dtype=np.float64).reshape(3)
-        upper = np.minimum(upper, [_sqdist(p[f], c).max() for f in range(len(p))])
+        upper = np.minimum(upper, [far2(p[f], c) for f in range(len(p))])
     upper = np.sqrt(upper) * (1 + 1e-12)
     best = -1.0
     hint = []
     for f in np.argsort(-upper, kind="stable"):
         if upper[f] <= best * (1.0 + rel):
             break
-        _, r, hint = _core_sphere(p[f], hint)  # the sets are alike: start from the last boundary
+        _, r, hint = _core_sphere(p[f], hint, compiled)  # the sets are alike: start from the last boundary
         best = max(best, r)
     return best

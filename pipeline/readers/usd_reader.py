@@ -63,9 +63,10 @@ def _check_arcs(path) -> None:
             raise InputError(path, f"its composition names more than {MAX_LAYERS} layers")
         try:
             refs = layer_references(layer, composition_only=True)
-        except Tf.ErrorException:
-            if layer == os.path.abspath(path):
-                return  # the stage's own open reports it
+        except Tf.ErrorException as exc:
+            if layer == os.path.abspath(path):  # never composed: usd-core would follow the arcs
+                # it parsed of a broken layer before failing (a FIFO sublayer hung it)
+                raise InputError(path, f"not a readable USD file: {one_line(exc, 200)}") from None
             raise InputError(path, f"a layer it references cannot be read: {os.path.basename(layer)}") from None
         packaged = layer.lower().endswith(".usdz")
         for ref in refs:

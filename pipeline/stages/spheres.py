@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from colossus.pipeline.geometry.minsphere import largest_min_sphere, min_sphere
+from colossus.pipeline.geometry.minsphere import KERNEL_MIN, largest_min_sphere, min_sphere
 from colossus.pipeline.model import SkinnedMesh, Parts, kernel_shapes, skel_transforms
 from colossus.pipeline.stages import StageReport
 from colossus.pipeline.tolerances import SPHERE_PAD_RADIUS, SPHERE_PAD_RELATIVE, model_scale
@@ -146,15 +146,20 @@ def spheres(mesh: SkinnedMesh) -> tuple[SkinnedMesh, StageReport]:
     r_min = np.zeros(P)
     pose_far = np.zeros((len(S), P))  # joint-space farthest vertex at each pose (exact, float64)
     details = []
+    # the minimal spheres run compiled when the stage's points over every pose make it worth the
+    # compile (minsphere.KERNEL_MIN; both forms give bit-identical spheres)
+    part_verts = [np.unique(mesh.triangles[parts_in.part_faces(p)].ravel()) for p in range(P)]
+    compiled = len(S) * sum(len(v) for v in part_verts) >= KERNEL_MIN
     for p in range(P):
         j = int(parts_in.joints[p])
-        verts = np.unique(mesh.triangles[parts_in.part_faces(p)].ravel())
+        verts = part_verts[p]
         pos, ji, jw = pos_all[..., verts, :], ji_all[verts], jw_all[verts]
         mats = (SK.fold(inv_S[:, j, None] @ to_skel) if mesh.skinning_method == SK.CLASSIC_LINEAR else
                 SK.fold_method(mesh.skinning_method, skin_skel, G, world=inv_S[:, j]))
         pts = SK.skin_frames(pos, ji, jw, mats, dtype=np.float64)  # (F, nv, 3) joint space
-        center, r = min_sphere(pts.reshape(-1, 3))
-        tight = largest_min_sphere(pts if len(slack_idx) == len(S) else pts[slack_idx], center, rel=TIGHT_REL)
+        center, r = min_sphere(pts.reshape(-1, 3), compiled)
+        tight = largest_min_sphere(pts if len(slack_idx) == len(S) else pts[slack_idx], center, rel=TIGHT_REL,
+                                   compiled=compiled)
         c32 = center.astype(np.float32)
         pts -= c32.astype(np.float64)
         d = np.sqrt(np.einsum("fvi,fvi->fv", pts, pts).max(1))

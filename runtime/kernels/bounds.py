@@ -174,6 +174,8 @@ def _pose_bounds_serial(world, part_joint, part_centers, part_radii, pj_offsets,
 #: Test D visits at most this many Pareto vertices per part (beyond it D is not worth it: the
 #: exact tier costs little more).
 PARETO_MAX = 96
+#: Rows per block of :func:`pareto_set`'s vectorised dominance test.
+_PARETO_BLOCK = 64
 
 
 class BoundData:
@@ -210,16 +212,22 @@ def pareto_set(d, w, limit=PARETO_MAX):
         return np.zeros(0, dtype=np.int64)
     _, first = np.unique(np.c_[d, w], axis=0, return_index=True)  # identical rows once
     order = first[np.argsort(-d[first], kind="stable")]  # larger d first: only later rows can be dominated
-    kept = []
-    kw = np.empty((0, w.shape[1]))
-    for i in order:
-        if len(kept) and np.any(np.all(kw >= w[i], axis=1)):
-            continue
-        kept.append(i)
+    # A row is dropped when an earlier row (in ``order``) has every weight >= its own.  Checking
+    # all earlier rows drops the same rows as checking the kept ones (an earlier dropped row is
+    # itself below a kept one), so it runs in blocks: each block's rows against the rows kept
+    # before it and against the block's earlier rows, vectorised (was one numpy call per row).
+    kept = np.zeros(0, dtype=np.int64)
+    for s in range(0, len(order), _PARETO_BLOCK):
+        b = order[s:s + _PARETO_BLOCK]
+        wb = w[b]
+        below = (wb[None, :, :] >= wb[:, None, :]).all(2)  # [i, j]: row j of the block >= row i
+        out = (below & np.tri(len(b), k=-1, dtype=bool)).any(1)
+        if len(kept):
+            out |= (w[kept][None, :, :] >= wb[:, None, :]).all(2).any(1)
+        kept = np.r_[kept, b[~out]]
         if len(kept) > limit:
             return None
-        kw = np.vstack([kw, w[i:i + 1]])
-    return np.array(kept, dtype=np.int64)
+    return kept
 
 
 def bound_data(points, joint_indices, joint_weights, geom_bind, bind, part_joint, part_centers, part_radii,

@@ -503,6 +503,24 @@ def test_glb_zero_scale_key_is_one_line(work, run_import):
                                                         "scale key at 0 s is zero or degenerate (0, 0, 0)")
 
 
+def test_glb_scale_changing_sign_is_one_line(work, run_import):
+    """The importer's side of COL518 (fuzz campaign 12, case 1781): a leaf joint whose scale keys
+    go from 1 to -1 between two frames is never 0 on a frame, but UsdSkel lerps it through 0 in
+    between, where the spheres stage's proof needs the inverse of the joint's pose.  Refused in
+    one line naming the clip, the time and the joint, never a 'not certified' sphere."""
+    def edit(doc, buf, span):
+        an = doc["animations"][0]
+        leaf = next(c for c in an["channels"] if c["target"]["path"] == "scale" and c["target"]["node"] == 0)
+        start, stride, count = span(an["samplers"][leaf["sampler"]]["output"])
+        for k in range(count // 2, count):
+            struct.pack_into("<3f", buf, start + k * stride, 1, -1, 1)
+    src = _glb_with(work, "flip.glb", edit)
+    out = work / "o.usda"
+    proc = run_import(src, out)
+    assert_no_internal_error(proc, out, "has a scale that changes sign between times")
+    assert "clip 'bend'" in proc.stderr and "joint 'lower'" in proc.stderr, proc.stderr
+
+
 def test_glb_huge_positions_no_warning(work, run_import):
     """Fuzz class 'RuntimeWarning: invalid value encountered in cast' (validate of an asset
     imported from positions at float32's limit): rejected at the read, one line, no warning."""

@@ -227,3 +227,33 @@ def test_usd_source_value_clips_are_checked_not_an_internal_error(tmp_path, outs
     src.write_text(text)
     out = tmp_path / "o.usda"
     assert_refused(run("import", src, "-o", out), out, repr(clip))
+
+
+@pytest.mark.parametrize("command", ["validate-jobs-1", "validate-jobs-2", "import", "load_collider"])
+def test_broken_layer_is_never_composed(imported, tmp_path, command):
+    """Fuzz campaign 12, case 1193 (a 'validate took over 60 s' timeout): a text layer with a
+    value usd-core cannot parse (a point with four coordinates) *and* a sublayer naming a FIFO.
+    ``Sdf`` cannot read the layer, so its arcs could not be listed, and the layer was then opened
+    as a stage anyway: ``Usd.Stage.Open`` composes what it did parse of a broken layer, sublayer
+    included, before it fails, and blocked for ever opening the FIFO.  Now a layer that ``Sdf``
+    cannot read is never composed: validate's COL001, import's and load_collider's one line."""
+    _, good = imported("limb", "glb")
+    os.mkfifo(tmp_path / "f.usda")
+    text = good.read_text().replace("(\n    defaultPrim", "(\n    subLayers = [@f.usda@]\n    defaultPrim", 1)
+    assert "f.usda" in text and "point3f[] points = [(" in text
+    asset = tmp_path / "a.usda"
+    asset.write_text(text.replace("point3f[] points = [(", "point3f[] points = [(7, ", 1))
+    if command == "load_collider":
+        from colossus.runtime import ColliderError, load_collider
+        with pytest.raises(ColliderError, match="not a readable USD file"):
+            load_collider(asset)
+        return
+    if command == "import":
+        out = tmp_path / "o.usda"
+        assert_refused(run("import", asset, "-o", out), out, "not a readable USD file: Tuple dimensions error")
+        return
+    p = run("validate", asset, "--jobs", command[-1], "--format", "json")
+    assert p.seconds < 10 and p.returncode == 1 and p.stderr == "", (p.seconds, p.returncode, p.stderr)
+    (rep,) = json.loads(p.stdout)["assets"]
+    assert [f["code"] for f in rep["findings"]] == ["COL001"], rep["findings"]
+    assert "Tuple dimensions error" in rep["findings"][0]["message"]

@@ -380,6 +380,36 @@ def test_min_sphere_degenerate_and_large():
         assert rs[f] == pytest.approx(r, rel=1e-12)
 
 
+
+def test_min_sphere_kernel_bit_identical_to_python_form():
+    """The numba core-set loop (``_minsphere_kernels._core_loop``) against the plain-Python form
+    it was ported from: same centre, radius and boundary points bit for bit, with and without a
+    hint, on blobs, degenerate sets (cocircular, collinear, flat, repeated) and float32; and the
+    kernel module's constants are minsphere's."""
+    from colossus.pipeline.geometry import _minsphere_kernels as K
+    from colossus.pipeline.geometry import minsphere as M
+
+    for name in ("_INSIDE_REL", "CONTAIN_REL", "_COLLINEAR", "_COPLANAR", "_CHUNKS", "_MAX_ITER"):
+        assert getattr(K, name) == getattr(M, name), name
+    rng = np.random.default_rng(7)
+    th = np.linspace(0, 2 * np.pi, 80, endpoint=False)
+    ring = np.c_[np.cos(th), np.sin(th), np.zeros(80)]
+    sets = [rng.normal(size=(n, 3)).astype(dt) for n in (1, 2, 3, 4, 5, 9, 60, 3000) for dt in (np.float64, np.float32)]
+    sets += [np.tile([[1.0, 2.0, 3.0]], (50, 1)), np.concatenate([ring, ring + [0, 0, 1]]), ring * 1e3 + 7.0,
+             np.concatenate([[[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]] * 5).astype(float),
+             np.c_[np.linspace(0, 1, 50), np.zeros(50), np.zeros(50)], rng.normal(size=(2000, 3)) * [1, 1e-9, 1]]
+    big = rng.normal(size=(200_000, 3)) * [1.0, 3.0, 0.5]
+    sets += [big, np.round(big, 1), np.round(big, 1).astype(np.float32)]  # many ties in the projections
+    for k, p in enumerate(sets):
+        hint = np.array([len(p) // 2], np.int64)
+        assert K._first_core(p, hint).tolist() == M._first_core(p, hint.tolist()), k
+        assert K._farthest2(p, np.array([0.1, 0.2, 0.3])) == M._sqdist(p, [0.1, 0.2, 0.3]).max(), k
+        b = M._core_sphere_python(p)
+        for hint in ((), b[2]):
+            a = M._core_sphere(p, hint)
+            a_py = M._core_sphere_python(p, hint)
+            assert np.array_equal(a[0], a_py[0]) and a[1] == a_py[1] and a[2] == a_py[2], (k, a, a_py)
+
 # -- skinning and spheres ------------------------------------------------------------------------
 
 def test_skin_points_kernel_matches_reference():

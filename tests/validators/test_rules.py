@@ -195,6 +195,10 @@ def b310(s):
     _indices(s, lambda j: (j.__setitem__((v, slice(0, 2)), j[v, 1::-1]), j)[1])
 
 
+def b318(s):
+    _mat_edit(s, "restTransforms", 1, lambda m: m.SetScale(Gf.Vec3d(1, 0, 1)) and None or m)
+
+
 def b401(s):
     _edit(s, MESH, "colossus:parts:faces", lambda a: a[:-1].astype(np.int32))
     _edit(s, MESH, "colossus:parts:faceOffsets", lambda a: (a.__setitem__(-1, a[-1] - 1), a)[1].astype(np.int32))
@@ -343,6 +347,10 @@ def b506(s):
 
 def b507(s):
     UsdSkel.Animation.Define(s, f"{SKEL}/extra").CreateJointsAttr(["root", "root/mid", "root/mid/tip"])
+
+
+def b518(s):
+    _clip_attr_edit(s, "bend", "scales", 4, lambda v: v.__setitem__(0, Gf.Vec3h(0, 0, 0)))
 
 
 def b508(s):
@@ -596,6 +604,83 @@ def test_broken_prerequisite_skips_dependent_rules_with_reason(good_path):
     assert "COL107" in r.codes()
     assert "COL403" in r.skipped and "radii" in r.skipped["COL403"]
     assert r.stats["frameproof"]["not_checked"]
+
+
+def _scale(s, joint, time, value):
+    _clip_attr_edit(s, "bend", "scales", time, lambda v: v.__setitem__(joint, Gf.Vec3h(*value)))
+
+
+def _mat(s, name, joint, row, value):
+    a = _attr(s, SKEL, name)
+    m = [np.array(x) for x in a.Get()]
+    m[joint][row] = value  # USD's row-vector layout: row 3 is the translation, column 3 (0, 0, 0, 1)
+    a.Set(Vt.Matrix4dArray([Gf.Matrix4d(*x.ravel().tolist()) for x in m]))
+
+
+@pytest.mark.parametrize("case, code, needle", [
+    ("zero scale", "COL518", "joint 'root' has a scale of 0 on an axis"),
+    ("zero scale, part joint", "COL518", "joint 'root/mid/tip' has a scale of 0 on an axis"),
+    ("scale flips sign", "COL518", "joint 'root/mid' has a scale that changes sign between times 3 and 4"),
+    ("scale 2^-23", "COL518", "joint 'root/mid' has a scale of 1.19209e-07 on an axis"),
+    ("unanimated joint, singular rest", "COL518", "joint 'root/mid/tip' has a transform that is not invertible"),
+    ("bind not affine", "COL307", "bind transform of joint 'root/mid' is not an invertible affine matrix"),
+    ("rest not affine", "COL318", "rest transform of joint 'root/mid' is not an invertible affine matrix"),
+])
+def test_singular_joint_transform_is_a_finding_not_a_crash(good_path, case, code, needle):
+    """Fuzz campaign 12, case 1781 (a translation line swapped into the scales: a scale of
+    (0, 0, 0) on frame 4) made the frame proof invert a singular joint pose: 'COL002 rule COL403
+    (holds-on-all-frames) crashed: LinAlgError: Singular matrix'.  Every file-supplied matrix the
+    proof inverts is now checked first: a singular (or non-affine) bind transform is COL307, a
+    rest transform COL318, a pose on a frame or between frames COL518; the proof does not run
+    on them (COL403/404/407 skipped, with the reason) and nothing crashes."""
+    import warnings
+    stage = open_copy(good_path)
+    if case == "zero scale":
+        _scale(stage, 0, 4, (0, 0, 0))
+    elif case == "zero scale, part joint":
+        _scale(stage, 2, 4, (0, 1, 1))
+    elif case == "scale flips sign":  # never 0 on a frame: UsdSkel's lerp crosses 0 at time 3.5
+        _scale(stage, 1, 4, (-1, 1, 1))
+    elif case == "scale 2^-23":  # the half-precision lerp towards it can round it to exactly 0
+        _scale(stage, 1, 4, (2.0 ** -23, 1, 1))
+    elif case == "unanimated joint, singular rest":  # the clip leaves the tip at its rest transform
+        anim = stage.GetPrimAtPath(f"{ROOT}/bend")
+        anim.GetAttribute("joints").Set(["root", "root/mid"])
+        for name in ("translations", "rotations", "scales"):
+            a = anim.GetAttribute(name)
+            for t in a.GetTimeSamples():
+                a.Set(a.Get(t)[:2], t)
+        _mat(stage, "restTransforms", 2, 0, (0, 0, 0, 0))
+    elif case == "bind not affine":  # an invertible 3x3 part, a singular 4x4
+        _mat(stage, "bindTransforms", 1, 3, (0, 1, 0, 0))
+    elif case == "rest not affine":
+        _mat(stage, "restTransforms", 1, 3, (0, 1, 0, 0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = check_asset(stage)
+    assert "COL002" not in r.codes(), [f.message for f in r.by_code("COL002")]
+    assert any(needle in f.message for f in r.by_code(code)), (code, [(f.code, f.message) for f in r.findings])
+    if code != "COL318":  # the rest transform of a joint every clip animates is never inverted
+        assert {"COL403", "COL407"} <= set(r.skipped), r.skipped
+
+
+def test_proof_guard_singular_pose_between_frames_is_never_certified(good_path):
+    """The guard behind COL518: a pose that is singular between frames (the proof run without the
+    readiness check that refuses it) leaves that interval undecided, never certified, and neither
+    raises (LinAlgError) nor warns."""
+    import warnings
+
+    from colossus.validators.asset import LoadedAsset
+    from colossus.validators.frameproof import prove
+    stage = open_copy(good_path)
+    _scale(stage, 1, 4, (-1, 1, 1))
+    asset = LoadedAsset(stage, "flip.usda")
+    assert not asset.ready("proof")[0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        proof = prove(asset, clips=["bend"])
+    assert proof.intervals["undecided"] + proof.intervals["failed"] > 0
+    assert any(b["t0"] == 3.0 and b["bound"] == np.inf for b in proof.between)
 
 
 def test_col701_proxy_deviation_within_max_deviation(good_path):

@@ -195,3 +195,24 @@ def clip_variants(asset, ctx):
         if got != [clip_paths[name]]:
             yield hit(f"variant {name!r} binds {got} as the Skeleton's {rel_name}, expected [{clip_paths[name]}]",
                       prim=where, clip=name)
+
+
+@rule("COL518", "invertible-poses", "error",
+      "Every joint's transform is invertible on every frame and between frames: no zero scale, no scale "
+      "changing sign between samples.", needs=("clips",))
+def invertible_poses(asset, ctx):
+    """What: on every frame of every clip, every joint's transform composed down the hierarchy is
+    an affine matrix whose 3x3 part has |det| > 1e-12; no animated scale is below 2^-22 on an
+    axis, and none changes sign between two samples (UsdSkel lerps scales, so it would pass
+    through 0 in between).
+    Why: the frame proof measures each part in its joint's space, the inverse of the joint's
+    pose, and a joint squashed to nothing has none; a zero scale is not a pose a collider can be
+    proven (or a ball moved) in.
+    Example: a scale of `(0, 0, 0)` on frame 4, or `(1, 1, 1)` then `(-1, 1, 1)` on the next frame."""
+    for c in asset.clips:
+        for a, t, kind, detail in asset.clip_sample_issues[c.name]:
+            if kind != "singular":
+                continue
+            joint, why = detail
+            yield hit(f"clip {c.name!r} time {t:g}: joint {joint!r} {why}",
+                      clip=c.name, time=float(t), frame=int(np.searchsorted(c.times, t)), joint=joint)

@@ -113,6 +113,22 @@ def bind_invertible(asset, ctx):
         yield hit("geomBindTransform is not invertible")
 
 
+@rule("COL318", "rest-invertible", "error", "Rest transforms are invertible affine matrices.", needs=("skeleton",))
+def rest_invertible(asset, ctx):
+    """What: every `restTransforms` matrix has a 3x3 part with |det| > 1e-12 and a last row
+    (0, 0, 0, 1).
+    Why: a joint a clip leaves unanimated takes its rest transform, and the frame proof measures
+    each part in its joint's space, the inverse of the joint's pose; a singular rest transform
+    squashes the joint and everything under it to nothing.
+    Example: a rest matrix with a zero scale axis, or a last row (0, 1, 0, 0)."""
+    det = np.linalg.det(asset.rest[:, :3, :3])
+    affine = np.all(np.abs(asset.rest[:, 3] - [0, 0, 0, 1]) < 1e-9, axis=1)
+    bad = np.nonzero((np.abs(det) <= tol.MIN_DETERMINANT) | ~affine)[0]
+    for j in bad[:20]:
+        yield hit(f"rest transform of joint {asset.joints[j]!r} is not an invertible affine matrix (det {det[j]:.3g})",
+                  joint=asset.joints[j])
+
+
 @rule("COL308", "bind-matches-rest", "warning",
       "Bind transforms equal the rest transforms composed down the hierarchy.", needs=("skeleton",))
 def bind_matches_rest(asset, ctx):
