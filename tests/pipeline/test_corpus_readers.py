@@ -133,8 +133,8 @@ def test_write_refuses_what_usd_core_cannot_open(tmp_path):
 def test_robot_expressive_rigid_parts_and_small_ones(imported):
     """RobotExpressive: 7214 vertices, only the hands (1108) skinned; the rest are meshes parented
     to bone nodes, bound with weight 1 to their joint.  Hand weights up to 1.755 are normalised and
-    counted; the head's 3 morph targets are named in one line, a note: their weights are 0 by
-    default and in every clip, so nothing of them is left out (no not-carried item)."""
+    counted; the head's 3 morph targets (on its 3 primitives) are carried as blend shapes (issue 21),
+    so nothing is named about them and nothing is left out (no not-carried item)."""
     res, out = imported("realworld/threejs_r121_RobotExpressive.glb")
     rep = _read(res)
     assert rep.counts["vertices"] == 7214
@@ -144,8 +144,9 @@ def test_robot_expressive_rigid_parts_and_small_ones(imported):
     assert {x["joint"] for x in info if x["name"] == "Torso"} == {"Body"}
     wn = rep.details["weights_normalised"]
     assert wn["vertices"] == 752 and wn["max_sum"] == pytest.approx(1.7551, abs=1e-3)
-    morph = [w for w in rep.warnings if "morph targets" in w]
-    assert len(morph) == 1 and "Head (3)" in morph[0] and "weight 0" in morph[0]
+    assert not [w for w in rep.warnings if "morph targets" in w]
+    shapes = [b.name for b in res.mesh.blend_shapes]
+    assert len(shapes) == 9 and all(n.startswith("Head_") for n in shapes), shapes
     assert res.mesh.source["not_carried"] == []
     np.testing.assert_allclose(res.mesh.joint_weights.sum(axis=1), 1.0, atol=1e-5)
     # every rigid vertex has one influence of weight 1
