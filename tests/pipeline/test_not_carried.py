@@ -160,6 +160,17 @@ def test_fbx_dual_quaternion_skin_warns_once_with_a_bound_and_strict_refuses(tmp
     _one_line_refusal(paths[0], tmp_path, "fbx_skinning_type")
 
 
+def _blend_skin(weights):
+    """An edit making the limb's Skin a Maya Blend skin with per-vertex ``BlendWeights`` ``weights``
+    on control points 0..3."""
+    def edit(top):
+        s = _skin(top)
+        W.set_child(s, "SkinningType", [("S", "Blend")])
+        W.set_child(s, "Indexes", [("i", np.arange(4, dtype=np.int32))])
+        W.set_child(s, "BlendWeights", [("d", np.array(weights, dtype=np.float64))])
+    return edit
+
+
 def test_fbx_blend_skin_through_ufbx_takes_the_nearer_method_with_its_bound(tmp_path, ufbx_road):
     """Maya's per-vertex Blend: all weights 0 is linear (nothing named); one vertex at 0.5 is
     skinned linearly (the nearer) with the bound 0.5 x its own linear / dual-quaternion gap, at
@@ -167,13 +178,7 @@ def test_fbx_blend_skin_through_ufbx_takes_the_nearer_method_with_its_bound(tmp_
     from colossus.pipeline.readers import read
     from colossus.pipeline.readers.bounds import dq_lbs_gap, posed_size
 
-    def blend(weights):
-        def edit(top):
-            s = _skin(top)
-            W.set_child(s, "SkinningType", [("S", "Blend")])
-            W.set_child(s, "Indexes", [("i", np.arange(4, dtype=np.int32))])
-            W.set_child(s, "BlendWeights", [("d", np.array(weights, dtype=np.float64))])
-        return edit
+    blend = _blend_skin
     zero = _limb(tmp_path, blend([0, 0, 0, 0]), "zero", ascii_too=False)[0]
     half = _limb(tmp_path, blend([0, 0.5, 0, 0]), "half", ascii_too=False)[0]
     assert _items(zero) == [] and read(zero).skinning_method == "classicLinear"
@@ -186,13 +191,7 @@ def test_fbx_blend_skin_through_ufbx_takes_the_nearer_method_with_its_bound(tmp_
 
 
 def test_fbx_blend_skin_fires_only_with_non_zero_blend_weights(tmp_path, assimp_road):
-    def blend(weights):
-        def edit(top):
-            s = _skin(top)
-            W.set_child(s, "SkinningType", [("S", "Blend")])
-            W.set_child(s, "Indexes", [("i", np.arange(4, dtype=np.int32))])
-            W.set_child(s, "BlendWeights", [("d", np.array(weights, dtype=np.float64))])
-        return edit
+    blend = _blend_skin
     zero = _limb(tmp_path, blend([0, 0, 0, 0]), "zero")
     half = _limb(tmp_path, blend([0, 0.5, 0, 0]), "half")
     for p in zero:
