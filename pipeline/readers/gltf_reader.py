@@ -345,6 +345,18 @@ def _triangles(mode, idx, path, what):
     return None  # points / lines: no surface
 
 
+def _sampler(path, samplers, ch, ai, what):
+    """``(sampler, interpolation)`` of animation ``ai``'s channel ``ch``, checked (one line each)."""
+    si = ch.get("sampler")
+    if not isinstance(si, int) or not 0 <= si < len(samplers):
+        raise InputError(path, f"{what}: sampler {si!r} out of range")
+    smp = samplers[si]
+    interp = smp.get("interpolation", "LINEAR")
+    if interp not in ("LINEAR", "STEP", "CUBICSPLINE"):
+        raise InputError(path, f"animation {ai}: unknown interpolation {interp!r}")
+    return smp, interp
+
+
 def read_scene(path, budget: AllocationBudget) -> Scene:
     """Read a glTF 2.0 file into a :class:`Scene` (no joint or mesh choice made yet)."""
     return _read_scene(path, budget)[0]
@@ -502,14 +514,8 @@ def _read_scene(path, budget: AllocationBudget):
                 node = tgt["node"]
             if not isinstance(node, int) or not 0 <= node < k:
                 raise InputError(path, f"animation {ai} channel {ci}: node {node!r} out of range")
-            si = ch.get("sampler")
-            if not isinstance(si, int) or not 0 <= si < len(samplers):
-                raise InputError(path, f"animation {ai} channel {ci}: sampler {si!r} out of range")
-            smp = samplers[si]
-            interp = smp.get("interpolation", "LINEAR")
-            if interp not in ("LINEAR", "STEP", "CUBICSPLINE"):
-                raise InputError(path, f"animation {ai}: unknown interpolation {interp!r}")
             what = f"animation {ai} channel {ci}"
+            smp, interp = _sampler(path, samplers, ch, ai, what)
             t = g.accessor(smp["input"], what + " input").astype(np.float64).reshape(-1)
             v = g.accessor(smp["output"], what + " output").astype(np.float64)
             width = 4 if p == "r" else 3
@@ -592,13 +598,7 @@ def _weight_channels(g, a, ai, samplers, nodes, node_meshes, meshes, path) -> li
         if ni not in node_meshes:
             continue
         what = f"animation {ai} channel {ci}"
-        si = ch.get("sampler")
-        if not isinstance(si, int) or not 0 <= si < len(samplers):
-            raise InputError(path, f"{what}: sampler {si!r} out of range")
-        smp = samplers[si]
-        interp = smp.get("interpolation", "LINEAR")
-        if interp not in ("LINEAR", "STEP", "CUBICSPLINE"):
-            raise InputError(path, f"animation {ai}: unknown interpolation {interp!r}")
+        smp, interp = _sampler(path, samplers, ch, ai, what)
         t = g.accessor(smp["input"], what + " input").astype(np.float64).reshape(-1)
         v = g.accessor(smp["output"], what + " output").astype(np.float64).reshape(-1)
         count = len(meshes[node_meshes[ni][0]].shapes)

@@ -59,6 +59,7 @@ import numpy as np
 
 from .. import notcarried
 from ..errors import InputError
+from ..model import skel_transforms
 from ..xforms import compose_trs, decompose_trs, degenerate, slerp
 from . import bounds, fbx_checks, fbx_doc
 from .common import AllocationBudget, check_finite, check_input_file
@@ -252,11 +253,8 @@ class _Graph:
         self.names, self.parents, self.world, self.theirs = names, parents, world, theirs
 
     def compose(self, local) -> np.ndarray:
-        """World transforms (..., k, 4, 4) of local ones."""
-        world = np.empty_like(local)
-        for i, p in enumerate(self.parents):
-            world[..., i, :, :] = local[..., i, :, :] if p < 0 else world[..., p, :, :] @ local[..., i, :, :]
-        return world
+        """World transforms (..., k, 4, 4) of local ones (:func:`pipeline.model.skel_transforms`)."""
+        return skel_transforms(local, self.parents)
 
     def locals_of_many(self, worlds) -> np.ndarray:
         return np.array([self.locals_of(w) for w in worlds]).reshape(worlds.shape)
@@ -492,10 +490,10 @@ def _sample_stacks(r: _Read, fps: float, budget):
     return out
 
 
-def _channels(r: _Read, rest_local, seconds, worlds):
-    """Translation / rotation / scale keys of every node whose local transform leaves its rest
-    value at some frame, and the locals those keys recompose to (for the check)."""
-    local = np.array([r.locals_of(w) for w in worlds])
+def _channels(r: _Read, rest_local, seconds, local):
+    """Translation / rotation / scale keys of every node whose local transform ``local``
+    (f, k, 4, 4) leaves its rest value at some frame, and the locals those keys recompose to (for
+    the check)."""
     # moved: beyond float32 noise of the file's own values (curves are stored in float32)
     scale = 1.0 + np.maximum(np.abs(rest_local).max(axis=(1, 2)), np.abs(local).max(axis=(0, 2, 3)))
     moved = np.abs(local - rest_local[None]).max(axis=(0, 2, 3)) > MOVED * scale
@@ -664,11 +662,15 @@ def read_ufbx(path, meshes=None, fps=None):
                 chain.add(n)
                 n = int(x.parents[n])
     chain = np.array(sorted(chain), dtype=np.int64)
+    stack_locals = []  # each stack's local transforms, computed once: checked here, keyed below
     for label, worlds in [("at rest", x.world[None])] + [(f"in animation {n!r}", w) for n, _, _, w in x.stacks]:
         with np.errstate(all="ignore"):
-            bad = np.argwhere(degenerate(worlds[:, chain]) | degenerate(r.locals_of_many(worlds)[:, chain]))
+            local = r.locals_of_many(worlds)
+            bad = np.argwhere(degenerate(worlds[:, chain]) | degenerate(local[:, chain]))
         if len(bad):
             raise InputError(path, f"the transform of node {x.names[chain[bad[0][1]]]!r} {label} {_BAD_XFORM}")
+        stack_locals.append(local)
+    stack_locals = stack_locals[1:]
 
     # transform_skin: C = N @ inv(N_bind) of the one skinned mesh node, at rest and at every frame
     fold, moved_by = False, 0.0
@@ -686,6 +688,9 @@ def read_ufbx(path, meshes=None, fps=None):
             fold = True
             r.world, r.theirs = c_rest @ r.world, c_rest @ r.theirs
             stacks = [(n, sp, sec, cf[:, None] @ w) for (n, sp, sec, w), cf in zip(stacks, c_frames)]
+            roots = r.parents < 0  # C moves the roots' locals only: a child's is its parent's inverse times its own
+            for local, cf in zip(stack_locals, c_frames):
+                local[:, roots] = cf[:, None] @ local[:, roots]
         elif moves:
             worst = 0.0
             for world, c in [(r.world, c_rest)] + [
@@ -700,7 +705,7 @@ def read_ufbx(path, meshes=None, fps=None):
     between = []
     checks = [("rest", r.compose(rest_local))]
     for si, (name, span, seconds, worlds) in enumerate(stacks):
-        chans, recomposed, trs = _channels(r, rest_local, seconds, worlds)
+        chans, recomposed, trs = _channels(r, rest_local, seconds, stack_locals[si])
         anims.append(Animation(name, chans, span, weights=_shape_channels(x, si, seconds)))
         for f in _check_frames(len(seconds)):
             label = f"{name} at {seconds[f]:.4g} s"
