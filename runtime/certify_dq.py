@@ -74,11 +74,21 @@ lK_par / n0inv_j``, ``dK_j = dK_par n0_j + nK_par n1_j``.  Then
    max_v (L_v l / 2 + 2 eps_v)`` with ``G`` the part's exact farthest distance.  In ``J``'s space
    ``|y - c_P| <= |x - C| / sigma_min(K_J) <= U / lK_J``, held to the same radius ``rho`` as the
    linear certificate (:func:`runtime.certify.continuous`: the stage sphere then holds).
+9. Across a hemisphere flip (where item 3 cannot exclude one, UsdSkel's DQS jumps and item 8's
+   Lipschitz argument does not apply) a static bound still holds at every ``u``: item 4 needs no
+   continuity (``b . q_piv = sum w_j |q_j . q_piv|`` whichever signs UsdSkel picks), so by item 5
+   ``|x - C| <= |p - o| + |T(b, c_D)| + eps_v <= |p - o| + sum w_j Dm_j / w_max + eps_v``
+   (``|T(b, c)| <= 2 |c| / |b|``, ``|d_j| = |D_j| / 2``).  ``U`` is the smaller of the two bounds
+   where there is no flip and this one where there may be; with it a flip no longer leaves an
+   interval undecided at the depth limit.
 
-Where the bound's hypotheses fail it never certifies (status 4, undecided, reported as a failure):
-scales that change over the interval (UsdSkel rounds their lerp to half precision, a step
-function), a skinning transform far from rigid (``eta_j > ETA_MAX``) or mirrored, negative
-weights.  Subdivision halves ``l`` (the bounds above hold on the whole interval, so on every part
+Item 8's hypotheses fail where scales change over the interval (UsdSkel rounds their lerp to half
+precision, a step function) or a skinning transform is far from rigid (``eta_j > ETA_MAX``): there
+only item 9's bound applies, with every factor's norms padded by its half-precision ``eps``
+(:func:`runtime.certify.factor_bounds`), so ``eta_j`` and ``E_j`` hold at every time of the
+interval.  Where item 9's fail too (a mirrored skinning transform, negative weights) it never
+certifies (status 4, undecided, reported as a failure; the spheres stage refuses to write such an
+asset).  Subdivision halves ``l`` (the bounds above hold on the whole interval, so on every part
 of it) up to ``max_depth`` times.
 """
 
@@ -276,6 +286,11 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
     fac = C.factor_bounds(clip, times, rig.rest_local)
     pads = quat_pads(clip, times, rig.rest_local, len(rig.bind))
     nK, lK, dK, eta, omega = _joint_bounds(rig, fac, pads)
+    # item 9's static bound holds across half-precision scale steps too: the factors' norms padded by eps
+    fac_s = dict(fac, fw=fac["fw"].copy(), iv=fac["iv"].copy())
+    fac_s["fw"][..., 0] += fac["eps"][..., 0]
+    fac_s["iv"][..., 0] += fac["eps"][..., 1]
+    nKs, lKs, _, etas, _ = _joint_bounds(rig, fac_s, pads)
     Jp = rig.part_joint
 
     # -- the radius held (as runtime.certify.continuous): scale bounds of N_J = world @ K_J
@@ -310,6 +325,8 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
         else np.ones((F, 0))
     proper = (dets > 0).all(axis=1)
     rigid &= proper[:-1] & proper[1:]
+    # item 9 needs no smoothness nor near-rigidity: proper at the samples, sigma_min > 0 between, weights >= 0
+    static_ok = proper[:-1] & proper[1:] & nonneg & ((lKs[:, used] > 0).all(axis=1) if len(used) else True)
 
     # -- per (part, joint) pair: E (bound on |Y_b(o) - c_P|) and V (its speed) (item 7)
     pair_part = np.repeat(np.arange(P), np.diff(bd.pj_offsets))
@@ -328,6 +345,7 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
     E = (np.maximum(e0, e1) + delta + pert) * (1 + ROUND)
     V = _path_speeds(rig, fac, z0, pads) if M else np.zeros((I, 0))
     Dm = nK[:, Jp[pair_part]] * E
+    Dms = nKs[:, Jp[pair_part]] * E
     Dv = dK[:, Jp[pair_part]] * E + nK[:, Jp[pair_part]] * V
 
     # -- per part: Lipschitz constant L and constant eps (items 4-7), per interval
@@ -335,6 +353,7 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
     pbind = rig.points.astype(np.float64) @ G[:3, :3].T + G[:3, 3]
     Lp = np.full((I, P), np.inf)
     Ep = np.full((I, P), np.inf)
+    Sp = np.full((I, P), np.inf)
     pairs = []  # per part: (joint, pivot) index arrays for the flip test
     with np.errstate(all="ignore"):
         for p in range(P):
@@ -342,6 +361,7 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
             if len(vs) == 0:
                 Lp[:, p] = 0.0
                 Ep[:, p] = 0.0
+                Sp[:, p] = 0.0
                 pairs.append((np.zeros(0, np.int64), np.zeros(0, np.int64)))
                 continue
             lo, hi = bd.pj_offsets[p], bd.pj_offsets[p + 1]
@@ -360,17 +380,26 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
             dm = np.where(live[None], Dm[:, k], 0.0)
             dv = np.where(live[None], Dv[:, k], 0.0)
             cD = 0.5 * (w[None] * dm).sum(2)
+            ets = np.where(live[None], etas[:, jj], 0.0)
+            dms = np.where(live[None], Dms[:, k], 0.0)
             cDd = 0.5 * (w[None] * (dv + dm * om / 2)).sum(2)
             L = 2.0 * cDd / wmax[None] + 6.0 * cD * bdot / wmax[None] ** 2
             eps_v = (sw_ + np.abs(jw[vs].sum(1) - 1.0)[None]) * np.linalg.norm(pbind[vs], axis=1)[None] \
                 + sw_ * np.linalg.norm(o_bind[p]) / wmax[None]
             Lp[:, p] = np.max(L, axis=1) * (1 + ROUND)
             Ep[:, p] = np.max(eps_v, axis=1) * (1 + ROUND)
+            # item 9: the flip-free static bound |p - o| + sum w_j Dm_j / w_max + eps_v
+            sws = (w[None] * ets).sum(2)
+            eps_s = (sws + np.abs(jw[vs].sum(1) - 1.0)[None]) * np.linalg.norm(pbind[vs], axis=1)[None] \
+                + sws * np.linalg.norm(o_bind[p]) / wmax[None]
+            Sp[:, p] = np.max(np.linalg.norm(pbind[vs] - o_bind[p], axis=1)[None]
+                              + (w[None] * dms).sum(2) / wmax[None] + eps_s, axis=1) * (1 + ROUND)
             a, b = np.broadcast_to(piv[:, None], jj.shape)[live], jj[live]
             u = np.unique(np.c_[a, b][a != b], axis=0)
             pairs.append((u[:, 1].astype(np.int64), u[:, 0].astype(np.int64)))
     ok_int = smooth & rigid & nonneg
     Lp[~np.isfinite(Lp)] = np.inf
+    Sp[~np.isfinite(Sp)] = np.inf
 
     ok = np.asarray(frame_ok, dtype=bool)
     ends_ok = ok[:-1] & ok[1:]
@@ -389,7 +418,11 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
             key = (i, p)
             if out.status[i, p] in (3, 4) and not growth:
                 continue
-            if not ok_int[i]:
+            if not ok_int[i]:  # only item 9's static bound applies here
+                Us = Sp[i, p] * (1 + ROUND) / (lKs[i, Jp[p]] * (1 - 1e-12)) if static_ok[i] else np.inf
+                if Us <= rho[i, p] or (growth and np.isfinite(Us)):
+                    worst[key] = max(worst.get(key, -np.inf), Us)
+                    continue
                 bad_hyp.add(key)
                 out.status[i, p] = 4
                 continue
@@ -404,6 +437,9 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
                 no_flip = True
             Ga, Gb = tm.dist[(a, p)], tm.dist[(b, p)]
             U = ((Ga + Gb) / 2 + Lp[i, p] * l / 2 + 2 * Ep[i, p]) * (1 + ROUND) / (lK[i, Jp[p]] * (1 - 1e-12))
+            Us = Sp[i, p] * (1 + ROUND) / (lKs[i, Jp[p]] * (1 - 1e-12))  # item 9: holds across flips
+            U = min(U, Us) if no_flip else Us
+            no_flip = no_flip or bool(np.isfinite(Us))
             if no_flip and U <= rho[i, p]:
                 worst[key] = max(worst.get(key, -np.inf), U)
                 deepest[key] = max(deepest.get(key, 0), depth)
@@ -437,8 +473,12 @@ def continuous(rig, clip, times, frame_bound, frame_ok, tol_abs: float, tol_rel:
     for i, p in np.argwhere((out.status == 3) | (out.status == 4)):
         f = _describe_failure(rig, times, int(i), int(p), out, tm, found.get((int(i), int(p))))
         if (int(i), int(p)) in bad_hyp:
-            f["reason"] = ("the dual-quaternion bound's hypotheses fail on this interval (animated scales, a "
-                           "stretched or mirrored skinning transform, or negative weights): not certified")
+            f["reason"] = ("the dual-quaternion bound's hypotheses fail on this interval (a mirrored skinning "
+                           "transform or negative weights), or with animated scales or a stretched skinning "
+                           "transform its static bound (item 9) exceeds the radius: not certified"
+                           if static_ok[int(i)] and not ok_int[int(i)] else
+                           "the dual-quaternion bound's hypotheses fail on this interval (a mirrored skinning "
+                           "transform or negative weights): not certified")
         out.failures.append(f)
     return out
 

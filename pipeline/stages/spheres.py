@@ -27,7 +27,10 @@ holding each interval to the padded minimal radius (``r (1 + SPHERE_PAD_RADIUS) 
 where a non-uniform scale on its path makes the certificate conservative, exactly as the validator
 holds a radius): wherever it cannot, it subdivides, down to 2^6 sub-steps, and the part's radius
 becomes the largest bound it reached over that ratio (``growth`` in the report, beyond the padded
-radius; 0 for most parts).  The validator's adaptive subdivision stops at or before every node this one stopped
+radius; 0 for most parts).  Where it reaches no finite bound (a dual-quaternion skin outside its
+bound's hypotheses: animated scales, a stretched or mirrored skinning transform, negative weights)
+no radius would pass the validator: the import fails closed with an :class:`InputError` naming the
+clip, interval, part and reason, and nothing is written.  The validator's adaptive subdivision stops at or before every node this one stopped
 at (its radius is at least the bound there), so the written spheres pass it.  Finally the radius
 is rounded up to float32.
 
@@ -42,6 +45,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from colossus.pipeline.errors import InputError
 from colossus.pipeline.geometry.minsphere import KERNEL_MIN, largest_min_sphere, min_sphere
 from colossus.pipeline.model import SkinnedMesh, Parts, kernel_shapes, skel_transforms
 from colossus.pipeline.stages import StageReport
@@ -229,5 +233,15 @@ def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
                                max_depth=GROWTH_DEPTH, frame_bound_space="joint")
         # a J-space bound U certifies a radius r where U <= r * ratio (non-uniform scales on the
         # joint's path): the radius each interval needs is U / ratio
-        need = np.maximum(need, np.max(np.where(np.isfinite(c.bound), c.bound / c.ratio, 0.0), axis=0))
+        need_c = c.bound / c.ratio
+        if not np.isfinite(need_c).all():  # fail closed: no radius would pass the validator
+            i, p = (int(x) for x in np.argwhere(~np.isfinite(need_c))[0])
+            why = next((f["reason"].removesuffix(": not certified") for f in c.failures if (f["interval"], f["part"]) == (i, p) and "reason" in f),
+                       "the certificate reached no finite bound")
+            raise InputError(mesh.source.get("path") or mesh.source.get("file"),
+                             f"not written (validate would reject it): no between-frames bound on "
+                             f"{int((~np.isfinite(need_c)).sum())} interval(s), first clip '{clip.name}' "
+                             f"{clip.times[i]:g}-{clip.times[i + 1]:g} part {p} "
+                             f"'{mesh.joint_names[int(parts_in.joints[p])]}': {why}")
+        need = np.maximum(need, np.max(need_c, axis=0))
     return need

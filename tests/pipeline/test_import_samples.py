@@ -579,3 +579,65 @@ def test_proxy_of_a_blend_shape_rig_names_the_shapes_not_carried_with_their_boun
                                   "--strict"], prog_name="colossus")
     assert r.exit_code != 0 and "morph_targets" in r.output + (r.stderr if r.stderr_bytes else "")
     assert not (tmp_path / "strict.usda").exists()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 7, 11])
+def test_dual_quaternion_rigs_whose_joints_flip_hemispheres_import_to_assets_validate_passes(tmp_path, seed):
+    """Never write what the validator rejects: these seeds of :func:`_dq_source` turn a joint far
+    enough that UsdSkel's DQS flips a hemisphere between two frames (the vertex jumps); the
+    spheres stage and the validator both bound such an interval with the flip-free static bound
+    (``runtime.certify_dq``, item 9), so the written asset passes ``colossus validate``."""
+    from click.testing import CliRunner
+    from colossus.cli import main
+
+    src = _dq_source(tmp_path / "dq.usda", seed)
+    out = tmp_path / "dq_collider.usda"
+    r = CliRunner().invoke(main, ["import", str(src), "-o", str(out)], prog_name="colossus")
+    assert r.exit_code == 0, r.output
+    v = CliRunner().invoke(main, ["validate", str(out), "--source", str(src)], prog_name="colossus")
+    assert v.exit_code == 0, v.output
+
+
+def _scaled_dq_source(path, scale):
+    """:func:`_dq_source` (seed 3) with the middle joint's scale animated by ``scale(frame)``."""
+    from pxr import Gf, Usd, UsdSkel, Vt
+
+    _dq_source(path, 3)
+    st = Usd.Stage.Open(str(path))
+    sa = UsdSkel.Animation(st.GetPrimAtPath("/Rig/Dance")).GetScalesAttr()
+    for f in range(10):
+        s = scale(f)
+        sa.Set(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1), Gf.Vec3h(*s), Gf.Vec3h(1, 1, 1)]), float(f))
+    st.GetRootLayer().Save()
+    return path
+
+
+def test_dual_quaternion_rig_with_animated_scales_imports_and_validates(tmp_path):
+    """Scales that change between frames (UsdSkel lerps them in half precision: a step function)
+    are bounded by the static bound with padded factors: the asset is written and validates."""
+    from click.testing import CliRunner
+    from colossus.cli import main
+
+    src = _scaled_dq_source(tmp_path / "dq.usda", lambda f: (1 + 0.1 * (f % 3),) * 3)
+    out = tmp_path / "dq_collider.usda"
+    r = CliRunner().invoke(main, ["import", str(src), "-o", str(out)], prog_name="colossus")
+    assert r.exit_code == 0, r.output
+    v = CliRunner().invoke(main, ["validate", str(out), "--source", str(src)], prog_name="colossus")
+    assert v.exit_code == 0, v.output
+
+
+def test_dual_quaternion_rig_the_proof_cannot_bound_is_refused_not_written(tmp_path):
+    """A mirrored joint (a negative scale) under dual-quaternion skinning: no bound of the proof
+    applies, so no radius would pass the validator; the import fails closed with one line naming
+    the file, the clip, the interval and the reason, exit 1, and writes nothing."""
+    from click.testing import CliRunner
+    from colossus.cli import main
+
+    src = _scaled_dq_source(tmp_path / "dq.usda", lambda f: (1, 1, -1))
+    out = tmp_path / "dq_collider.usda"
+    r = CliRunner().invoke(main, ["import", str(src), "-o", str(out)], prog_name="colossus")
+    assert r.exit_code == 1, r.output
+    (line,) = r.output.strip().splitlines()
+    assert str(src) in line and "validate would reject it" in line and "clip 'Dance'" in line, line
+    assert "mirrored" in line
+    assert not out.exists() and not list(tmp_path.glob("*collider*"))

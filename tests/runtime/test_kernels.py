@@ -802,6 +802,62 @@ def test_dq_certificate_fails_closed_outside_its_hypotheses(case):
     assert all("hypotheses" in f.get("reason", "") for f in c.failures if f["interval"] in np.flatnonzero(bad))
 
 
+@pytest.mark.parametrize("seed", range(10))
+def test_dq_static_bound_is_sound_across_scale_steps_and_flips(seed):
+    """Item 9 of :mod:`runtime.certify_dq`: on random DQS rigs whose scales change between samples
+    (UsdSkel's half-precision lerp, where the Lipschitz bound does not apply) and whose joints turn
+    far enough to flip hemispheres, the growth bound is finite and never below the dense maximum."""
+    rng = np.random.default_rng(900 + seed)
+    rig, clip, _ = random_dq_rig(rng, angle=0.6 + 0.1 * (seed % 3))
+    J = len(rig.bind)
+    clip.vs[:] = np.float16(1.0 + 0.3 * rng.random((len(clip.times), J, 1)) * (rng.random((1, J, 1)) < 0.5))
+    skel = naive.compose(naive.trs(clip.vt, clip.vr, clip.vs), rig.parents)
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    g = CDQ.certificate(rig, clip, clip.times, s.bound, np.ones_like(s.bound, bool), 0.0, 0.0,
+                        rho=np.zeros(rig.P), growth=True, max_depth=5)
+    assert np.isfinite(g.bound).all()
+    for i in range(len(clip.times) - 1):
+        far = _dense_dq(rig, clip, clip.times[i], clip.times[i + 1], steps=32).max(0)
+        assert np.all(far <= g.bound[i] * (1 + 1e-9)), (i, far, g.bound[i])
+
+
+def test_dq_static_bound_is_exact_for_rigid_vertices_so_one_percent_less_is_caught():
+    """Item 9's bound is ``|p - o|`` for a part whose vertices follow its own joint alone (and
+    whose joint is not scaled): with scales changing elsewhere it is the dense maximum itself, so a
+    static bound 1% smaller would fail the soundness test above."""
+    rng = np.random.default_rng(5)
+    rig, clip, _ = random_dq_rig(rng, angle=0.3)
+    jw = rig.joint_weights.copy()
+    ji = rig.joint_indices.copy()
+    p0 = rig.verts[rig.vert_offsets[0]:rig.vert_offsets[1]]
+    ji[p0] = rig.part_joint[0]
+    jw[p0] = [1, 0, 0, 0]
+    rig = C.Rig(rig.points, ji, jw, rig.geom_bind, rig.bind, rig.rest_local, rig.parents, rig.part_joint,
+                rig.part_centers, rig.part_radii, rig.vert_offsets, rig.verts, skinning_method="dualQuaternion")
+    J = len(rig.bind)
+    chain = {0} | set(_ancestors(rig.parents, 0))
+    scaled = np.array([j for j in range(J) if j not in chain])
+    clip.vs[:, scaled] = np.float16(1.0 + 0.2 * rng.random((len(clip.times), len(scaled), 1)))
+    skel = naive.compose(naive.trs(clip.vt, clip.vr, clip.vs), rig.parents)
+    s = C.sampled(rig, skel, 0.0, 1e-6)
+    g = CDQ.certificate(rig, clip, clip.times, s.bound, np.ones_like(s.bound, bool), 0.0, 0.0,
+                        rho=np.zeros(rig.P), growth=True, max_depth=5)
+    far = np.array([_dense_dq(rig, clip, clip.times[i], clip.times[i + 1], steps=16).max(0)
+                    for i in range(len(clip.times) - 1)])
+    assert np.all(far[:, 0] <= g.bound[:, 0] * (1 + 1e-9))
+    assert np.any(0.99 * g.bound[:, 0] < far[:, 0])
+    fac = C.factor_bounds(clip, clip.times, rig.rest_local)
+    assert (fac["eps"] > 0).any(axis=(1, 2)).all()  # every interval steps: only item 9 applies
+
+
+def _ancestors(parents, j):
+    out = []
+    while parents[j] >= 0:
+        j = int(parents[j])
+        out.append(j)
+    return out
+
+
 # -- blend shapes (the pre-pass of the one kernel) ---------------------------------------------
 def _random_shapes(rng, n, S=4, F=6, inbetweens=True):
     """Random blend shapes (sparse and dense, with in-betweens at weights below 0, inside (0, 1)
