@@ -34,6 +34,8 @@ The ``what`` ids (README, "Not carried"):
 ``gltf_extension``        a glTF extension used that changes geometry or deformation, not read
 ``ogre_vertex_animation``  an Ogre mesh's pose / morph (vertex) animation (assimp makes no clip)
 ``ogre_animation_link``   an Ogre skeleton's links to another skeleton's animations (not read)
+``skin_influences``      (the ``bind`` stage) influences beyond ``--max-influences`` or negligible
+                          ones dropped that move a vertex more than 1e-4 x the posed size
 ``usd_skinning_method``   meshes that mix ``primvars:skel:skinningMethod`` values: the collision
                           mesh carries one (the method of most points; a USD source whose
                           meshes agree has its method carried, linear or dual-quaternion)

@@ -325,6 +325,8 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None, s
     mesh = step("degenerate", lambda: drop_degenerate(mesh))
     mesh = step("orient", lambda: orient(mesh))
     mesh = step("bind", lambda: bind(mesh, s.max_influences, s.unweighted))
+    if strict and mesh.source.get(notcarried.SOURCE_KEY):  # the trim of skin weights moves vertices
+        raise InputError(src, notcarried.strict_refusal(mesh.source[notcarried.SOURCE_KEY]))
     if stop_after == "bind":
         return mesh, reports
     if s.proxy:

@@ -87,7 +87,7 @@ def compare_source(asset, source_path, chunk_frames: int = 64) -> SourceCheck:
             # the asset's settings (deterministic) and compare with that proxy
             m = build_collider(src, settings, stop_after="simplify")[0]
         else:
-            m = read_baked(src, settings)
+            m = as_limited(read_baked(src, settings), settings.max_influences)
     except (ColossusError, OSError, ValueError) as exc:
         out.error = str(exc)
         return out
@@ -161,6 +161,29 @@ def compare_source(asset, source_path, chunk_frames: int = 64) -> SourceCheck:
         if c.name not in asset_names and _ident(c.name) not in {cl.name for cl in asset.clips}:
             out.clip_problems.append((c.name, f"the source's clip {c.name!r} is not in the asset"))
     return out
+
+
+def as_limited(m, max_influences: int):
+    """The source's skin weights limited as the import's ``bind`` stage limits them (the strongest
+    ``max_influences``, negligible ones dropped, renormalised; :func:`pipeline.stages.bind.limit_influences`):
+    a deliberate, stated change (the asset's ``skin_influences`` not-carried record gives its
+    bound), so the comparison judges the rest exactly.  Unweighted vertices stay as read."""
+    from colossus.pipeline.stages.bind import limit_influences
+
+    jw = np.where(m.joint_weights > 0, m.joint_weights.astype(np.float64), 0.0)
+    total = jw.sum(axis=1)
+    live = total > 0
+    if not live.any():
+        return m
+    kk = max(int(max_influences), 1)
+    oj, ow, _, _, _ = limit_influences(m.joint_indices[live], jw[live] / total[live, None], kk)
+    k = max(kk, m.joint_indices.shape[1])
+    ji = np.zeros((m.vertex_count, k), np.int32)
+    w = np.zeros((m.vertex_count, k), np.float32)
+    ji[:, :m.joint_indices.shape[1]], w[:, :m.joint_weights.shape[1]] = m.joint_indices, m.joint_weights
+    ji[live], w[live] = 0, 0.0
+    ji[live, :kk], w[live, :kk] = oj, ow.astype(np.float32)
+    return m.replace(joint_indices=ji, joint_weights=w)
 
 
 def _ident(name: str) -> str:

@@ -11,9 +11,10 @@ import numpy as np
 
 from colossus.runtime.schema import parents_first
 
+from .. import notcarried
 from ..errors import InputError
 from ..model import Clip, SkinnedMesh
-from ..tolerances import NEGLIGIBLE_WEIGHT
+from ..tolerances import NEGLIGIBLE_WEIGHT, model_scale
 from . import StageReport
 
 UNWEIGHTED_POLICIES = ("error", "nearest-bone")
@@ -109,6 +110,55 @@ def limit_influences(joint_indices: np.ndarray, weights: np.ndarray, max_influen
     return out_j, out_w, over, negligible, dropped_weight
 
 
+#: A trim of skin weights (influences beyond ``max_influences``, negligible ones) that moves a vertex
+#: more than this x the model size is a ``skin_influences`` not-carried record (the fidelity
+#: tolerance of ``validate --source``, :data:`validators.tolerances.SOURCE_MOTION_RELATIVE`).
+TRIM_RELATIVE = 1e-4
+
+
+def _trim_moves(mesh: SkinnedMesh, ji_full, jw_full, ji_kept, jw_kept, rows) -> float:
+    """Largest distance, at the bind pose and at every frame of every clip, between the vertices
+    ``rows`` skinned with every influence they had (``ji_full``, ``jw_full``, normalised) and with
+    the kept ones: the mesh's own method, its blend shapes at each clip's weights (UsdSkel's
+    order), in skeleton space.  Exact at those poses (the one kernel, float64)."""
+    from colossus.runtime.kernels import skin as SK
+
+    from ..model import kernel_shapes, skel_transforms
+
+    inv_bind = np.linalg.inv(mesh.bind_transforms)
+    ks = kernel_shapes(mesh.blend_shapes, mesh.vertex_count) if mesh.blend_shapes else None
+    a_j, a_w = np.ascontiguousarray(ji_full[rows], np.int32), np.ascontiguousarray(jw_full[rows], np.float32)
+    b_j, b_w = np.ascontiguousarray(ji_kept[rows], np.int32), np.ascontiguousarray(jw_kept[rows], np.float32)
+    poses = [(mesh.bind_transforms[None], None)]
+    poses += [(skel_transforms(c.local, mesh.parents), c.shape_weights) for c in mesh.clips]
+    step = max(1, min(64, 2_000_000 // max(1, mesh.vertex_count if ks is not None else len(rows))))
+    worst = 0.0
+    for skel, W in poses:
+        for f0 in range(0, len(skel), step):
+            s = skel[f0:f0 + step]
+            if ks is not None and W is not None and W.shape[1] and np.any(W[f0:f0 + step]):
+                pts = SK.shape_points(mesh.positions, ks, W[f0:f0 + step])[:, rows]
+            else:
+                pts = mesh.positions[rows]
+            mats = SK.fold_method(mesh.skinning_method, s @ inv_bind, mesh.geom_bind)
+            d = SK.skin_frames(pts, a_j, a_w, mats, dtype=np.float64) - SK.skin_frames(pts, b_j, b_w, mats,
+                                                                                     dtype=np.float64)
+            worst = max(worst, float(np.sqrt(np.einsum("fvi,fvi->fv", d, d).max(initial=0.0))))
+    return worst
+
+
+def _posed_size(mesh: SkinnedMesh) -> float:
+    """The posed model size (the contract's: the mesh as its first clip's first frame poses it; the
+    bind pose without a clip), that tolerances are relative to."""
+    from colossus.runtime.kernels import skin as SK
+
+    from ..model import skel_transforms
+
+    skel = skel_transforms(mesh.clips[0].local[:1], mesh.parents) if mesh.clips else mesh.bind_transforms[None]
+    mats = SK.fold_method(mesh.skinning_method, skel @ np.linalg.inv(mesh.bind_transforms), mesh.geom_bind)
+    return model_scale(SK.skin_frames(mesh.positions, mesh.joint_indices, mesh.joint_weights, mats)[0]) or 1.0
+
+
 def bind(mesh: SkinnedMesh, max_influences: int = 4, unweighted: str = "error"):
     """Limit, clean and normalise skin weights; order joints parents-first.
 
@@ -177,9 +227,25 @@ def bind(mesh: SkinnedMesh, max_influences: int = 4, unweighted: str = "error"):
         "unweighted_assigned": assigned, "joints_reordered": bool(reordered),
     }
     warnings = []
-    if counts["influences_dropped"]:
+    rows = np.flatnonzero(over.any(axis=1) | negligible.any(axis=1))
+    moved = _trim_moves(out, ji, jw / np.where(total > 0, total, 1.0)[:, None], out_j, out_w, rows) if len(rows) else 0.0
+    size = _posed_size(out) if moved > 0 else 1.0
+    counts["trim_moves_relative"] = moved / size
+    if counts["influences_dropped"] and moved <= TRIM_RELATIVE * size:
         warnings.append(f"{counts['influences_dropped']} influences beyond the strongest {max_influences} dropped "
-                        f"on {counts['vertices_trimmed']} vertices (largest weight lost {counts['max_weight_dropped']:.4f})")
+                        f"on {counts['vertices_trimmed']} vertices (largest weight lost {counts['max_weight_dropped']:.4f}; "
+                        f"moves vertices up to {moved / size:.2g} x the model size)")
+    if moved > TRIM_RELATIVE * size:  # fail closed: named with its bound (--strict refuses)
+        item = notcarried.item(
+            "skin_influences", [f"{counts['vertices_trimmed']} vertices"],
+            f"{counts['influences_dropped']} influences beyond the strongest {max_influences} and "
+            f"{counts['negligible_dropped']} below {NEGLIGIBLE_WEIGHT:g} dropped (largest weight lost "
+            f"{counts['max_weight_dropped']:.4f}; import and validate with --max-influences "
+            f"{counts['source_max_influences']} to carry them) (bound: at the bind pose and every frame of every clip)",
+            moved / size)
+        out = out.replace(source=dict(out.source, **{notcarried.SOURCE_KEY:
+                                                      list(out.source.get(notcarried.SOURCE_KEY) or []) + [item]}))
+        warnings.append(notcarried.warning_line(item))
     if assigned:
         warnings.append(f"{assigned} unweighted vertices given to their nearest bone")
     return out, StageReport("bind", counts=counts, warnings=warnings)

@@ -667,3 +667,45 @@ def test_fbx_blend_shapes_through_ufbx_are_carried_as_ufbx_deforms_them(tmp_path
             for x in st.Traverse() if x.IsA(UsdSkel.BlendShape)]
     assert max(o * w for o, w in zip(offs, wmax)) > 1e3 * errs["frames"] * size
     print("barbarian blend shapes vs ufbx:", errs)
+
+
+def test_influences_the_bind_stage_drops_are_named_with_a_bound_an_independent_reference_confirms(tmp_path):
+    """Blender's barbarian has a vertex with 5 influences; ``--max-influences 4`` (the default) drops
+    the 5th (weight 0.05): a ``skin_influences`` record with the bound of what that moves (at the
+    bind pose and every frame), which ufbx's own evaluation of the file (``evaluate_skinning``, not
+    our reader) confirms: the asset is off ufbx by no more than the bound, and by more than half of
+    it (the bound is not vacuous).  ``--strict`` refuses; ``validate --source`` passes (it limits the
+    source as the settings say); with ``--max-influences 5`` nothing is named and the asset
+    validates with the same setting."""
+    from scipy.spatial import cKDTree
+
+    from references.compare import AssetRig, axis_scale
+    from references.ufbx_eval import skinned_points
+    from colossus.pipeline.readers import read
+
+    p = CORPUS / "realworld" / "ufbx_blender_293_barbarian_7400_binary.fbx"
+    if not p.exists():
+        pytest.skip("corpus not present")
+    out = tmp_path / "barbarian.usda"
+    r = _cli("import", p, "-o", out, "--json")
+    assert r.exit_code == 0, r.output
+    (it,) = [x for x in json.loads(r.stdout)["not_carried"] if x["what"] == "skin_influences"]
+    bound = it["bound_relative"]
+    assert 1e-3 < bound < 1e-2 and "--max-influences 5" in it["detail"]
+    src = read(p)
+    rig = AssetRig(out)
+    c = axis_scale(src.up_axis, src.meters_per_unit, rig.up_axis, rig.meters_per_unit)
+    codes = src.clips[0].times
+    theirs = skinned_points(p, codes / src.time_codes_per_second) @ c[:3, :3].T + c[:3, 3]
+    ours = rig.points(rig.clips[0], codes)
+    size = float(np.linalg.norm(np.ptp(ours[0], axis=0)))  # the posed size (first frame)
+    worst = max(cKDTree(b).query(a)[0].max() for a, b in zip(ours, theirs)) / size
+    assert 0.5 * bound < worst <= bound * 1.001 + 1e-5, (worst, bound)
+    _one_line_refusal(p, tmp_path, "skin_influences")
+    v = _cli("validate", out, "--source", p)
+    assert v.exit_code == 0, v.output
+    out5 = tmp_path / "barbarian5.usda"
+    r5 = _cli("import", p, "-o", out5, "--json", "--max-influences", 5)
+    assert r5.exit_code == 0 and not [x for x in json.loads(r5.stdout)["not_carried"] if x["what"] == "skin_influences"]
+    v5 = _cli("validate", out5, "--source", p, "--max-influences", 5)
+    assert v5.exit_code == 0, v5.output

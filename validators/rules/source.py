@@ -23,7 +23,10 @@ def source_motion(asset, ctx):
     importer with the settings in the asset's provenance) at that time; the model size is the
     asset's as the clip's first frame poses it, and a clip whose animated scales UsdSkel stores in
     half precision is allowed the storage bound it states on top (its `colossus:source`
-    customData, `storageErrorBoundRelative`).
+    customData, `storageErrorBoundRelative`).  The source's skin weights are limited as the
+    import's settings limit them (`--max-influences`, negligible weights dropped): the import
+    states what that moves (a `skin_influences` not-carried record with its bound, `--strict`
+    refuses it), so this rule judges everything else exactly.
     Why: a CI gate for stale colliders: an export re-made with other motion must be re-imported.
     Example: the animator re-keyed `walk`; the collider still has the old walk."""
     c = _check(asset, ctx)
