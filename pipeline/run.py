@@ -417,6 +417,8 @@ def import_asset(src, out, settings: ImportSettings | None = None, progress=None
         "settings": {k: ("" if v is None else v) for k, v in asdict(s).items()},
         "meshes": mesh_provenance(mesh.source.get("mesh_info", [])),
     }
+    if mesh.source.get("point_scale", 1.0) != 1.0:  # quantize.fold_point_scale: validate --source needs it
+        provenance["pointScale"] = float(mesh.source["point_scale"])
     items = mesh.source.get(notcarried.SOURCE_KEY) or []
     if items:
         provenance[notcarried.PROVENANCE_KEY] = notcarried.to_provenance(items)

@@ -94,7 +94,11 @@ def compare_source(asset, source_path, chunk_frames: int = 64) -> SourceCheck:
 
     # ---- vertices: match at the bind pose ------------------------------------------------------
     a_pts = asset.bind_points
-    s_pts = m.positions.astype(np.float64)
+    # the asset's points are pointScale x the source's where the importer folded a skeleton's
+    # scale into them (pipeline.stages.quantize.fold_point_scale: the same skinned points)
+    ps = prov.get("pointScale", 1.0)
+    ps = float(ps) if isinstance(ps, (int, float)) and not isinstance(ps, bool) and np.isfinite(ps) and ps > 0 else 1.0
+    s_pts = m.positions.astype(np.float64) * ps
     near = tol.SOURCE_MATCH_RELATIVE * out.size
     tree = cKDTree(s_pts)
     k = min(8, len(s_pts))

@@ -68,6 +68,157 @@ def fold_root_scale(mesh: SkinnedMesh, k: float) -> SkinnedMesh:
                         rest_transforms=locals_(mesh.rest_transforms), clips=clips)
 
 
+#: A joint whose bind transform's uniform scale differs from its parent's by more than this
+#: (relatively) has it folded out by :func:`fold_joint_scales`; less is float noise, left alone.
+JOINT_SCALE_STEP = 1e-5
+
+
+def joint_scales(mesh: SkinnedMesh, k: float) -> np.ndarray:
+    """(b,) the uniform scale ``s_j`` to divide out of each joint's space: ``k`` (:func:`root_scale`)
+    at the roots, then down each chain the parent's, times the joint's own step where its bind
+    transform's uniform scale (``|det|^(1/3)`` of its linear part) differs from its parent's by
+    more than :data:`JOINT_SCALE_STEP` (a centimetre subtree under a metre root, an armature
+    scaled below its root joint)."""
+    lin = mesh.bind_transforms[:, :3, :3]
+    u = np.cbrt(np.abs(np.linalg.det(lin)))
+    s = np.ones(len(mesh.parents))
+    from colossus.runtime.schema import parents_first
+    for j in parents_first(mesh.parents):
+        p = mesh.parents[j]
+        if p < 0:
+            s[j] = k
+            continue
+        step = u[j] / u[p] if u[p] > 0 else 1.0
+        s[j] = s[p] * step if np.isfinite(step) and step > 0 and abs(step - 1.0) > JOINT_SCALE_STEP else s[p]
+    return s
+
+
+def fold_joint_scales(mesh: SkinnedMesh, s: np.ndarray) -> SkinnedMesh:
+    """:func:`fold_root_scale` for a uniform scale ``s_j`` per joint (:func:`joint_scales`): the same
+    skinned points at every frame, exactly, with each joint's bind transform ``B_j / s_j`` (rigid
+    where ``B_j``'s scale was uniform, as Blender's armature, whose bones hold no scale, needs it).
+
+    Any constant ``C_j = s_j I`` per joint is a change of joint space: ``W'_j = W_j C_j^-1`` and
+    ``B'_j = B_j C_j^-1`` skin alike (``W'_j B'_j^-1 = W_j B_j^-1``), and a joint's local transform
+    becomes ``L'_j = C_p L_j C_j^-1``: for ``L = [A | t]``, ``[(s_p / s_j) A | s_p t]`` (``s_p = 1``
+    at a root), still translation, rotation and scale since ``s_p / s_j`` is a scalar.  A joint's
+    own space is ``s_j`` times larger, so the spheres, computed after this, are in it."""
+    s = np.asarray(s, dtype=np.float64)
+    if np.all(s == 1.0):
+        return mesh
+    sp = np.where(mesh.parents < 0, 1.0, s[np.maximum(mesh.parents, 0)])
+
+    def locals_(local):
+        out = local.copy()
+        out[..., :3, :3] *= (sp / s)[:, None, None]
+        out[..., :3, 3] *= sp[:, None]
+        return out
+
+    clips = tuple(type(c)(c.name, c.times, locals_(c.local), c.shape_weights) for c in mesh.clips)
+    bind = mesh.bind_transforms.copy()
+    bind[:, :3, :3] /= s[:, None, None]
+    return mesh.replace(bind_transforms=bind, rest_transforms=locals_(mesh.rest_transforms), clips=clips)
+
+
+def point_scale(mesh: SkinnedMesh) -> float:
+    """The uniform scale ``r`` the skeleton carries in every pose relative to its bind pose: the
+    median, over the joints that skin a vertex and every frame of every clip (the rest pose without
+    a clip), of ``a / b`` (``a``, ``b``: ``|det|^(1/3)`` of the joint's skeleton-space and bind
+    transforms' linear parts), where every such ratio is within :data:`JOINT_SCALE_STEP` of it and
+    it is not within that of 1 (a skeleton scaled after its skin was bound); else 1.0."""
+    from ..model import skel_transforms
+
+    used = np.unique(mesh.joint_indices[mesh.joint_weights > 0])
+    if not len(used):
+        return 1.0
+    b = np.cbrt(np.abs(np.linalg.det(mesh.bind_transforms[used, :3, :3])))
+    poses = [skel_transforms(c.local, mesh.parents) for c in mesh.clips]
+    if not poses:  # the rest pose is what a clip-less asset shows (with clips, only joints no clip moves use it)
+        poses = [skel_transforms(mesh.rest_transforms, mesh.parents)[None]]
+    a = np.concatenate([np.cbrt(np.abs(np.linalg.det(k[:, used, :3, :3]))) for k in poses])
+    with np.errstate(all="ignore"):
+        ratio = a / b[None]
+    if not np.all(np.isfinite(ratio)) or not np.all(ratio > 0):
+        return 1.0
+    r = float(np.median(ratio))
+    if abs(r - 1.0) <= JOINT_SCALE_STEP or np.max(np.abs(ratio / r - 1.0)) > JOINT_SCALE_STEP:
+        return 1.0
+    return r
+
+
+def fold_point_scale(mesh: SkinnedMesh, r: float) -> SkinnedMesh:
+    """``mesh`` with its points (and blend-shape offsets, and the geomBindTransform's translation)
+    ``r`` times larger and its bind transforms ``r`` times larger from the left (``B' = r B``): the
+    same skinned points at every frame, exactly.  With ``D = r I``: ``M_j p = K_j B_j^-1 p = K_j
+    (D B_j)^-1 (D p)``, and ``D G x = G' (r x)`` for ``G' = [A_G | r t_G]``.  Where the skeleton
+    carries ``r`` in every pose relative to its bind (:func:`point_scale`), the bind transforms
+    then hold the skeleton's own scale, which :func:`fold_joint_scales` divides out of both: the
+    asset's joints are rigid at bind and in every pose, as Blender's armature (bones hold no
+    scale) shows them."""
+    from dataclasses import replace as dc_replace
+
+    if r == 1.0:
+        return mesh
+    D = np.diag([r, r, r, 1.0])
+    G = mesh.geom_bind.copy()
+    G[:3, 3] *= r
+    shapes = tuple(dc_replace(b, offsets=(b.offsets.astype(np.float64) * r).astype(np.float32),
+                              inbetweens=tuple((w, (o.astype(np.float64) * r).astype(np.float32))
+                                               for w, o in b.inbetweens))
+                   for b in mesh.blend_shapes)
+    return mesh.replace(positions=(mesh.positions.astype(np.float64) * r).astype(np.float32),
+                        geom_bind=G, bind_transforms=D @ mesh.bind_transforms, blend_shapes=shapes)
+
+
+def unit_range_shapes(mesh: SkinnedMesh):
+    """``mesh`` with every blend shape that has no in-betweens weighted in [0, 1] in every clip, the
+    same points at every time; and the number of shapes changed.
+
+    Blender's USD importer turns blend shapes into shape keys whose values it clamps to [0, 1]: a
+    weight of -0.06 (Blender's own barbarian) or 1.3 plays differently there than in usd-core.
+    Without in-betweens a shape moves its points by ``w o``, linear in ``w``, so with ``w = w+ -
+    w-`` (``w+ = max(w, 0)``, ``w- = max(-w, 0)``) a negative range becomes a second shape
+    ``<name>_neg`` with offsets ``-o`` and weights ``w-`` (UsdSkel lerps weights between frames, and
+    ``lerp(w+) - lerp(w-) = lerp(w)``: exact there too), and a range up to ``m > 1`` becomes offsets
+    ``m o`` and weights ``w / m`` (float32 rounding only).  The proof's bound ``sum |w| |o|`` is
+    unchanged.  Shapes with in-betweens (a piecewise-linear response) keep their weights."""
+    from dataclasses import replace as dc_replace
+
+    if not mesh.blend_shapes or not mesh.clips:
+        return mesh, 0
+    W = [c.shape_weights.astype(np.float64) for c in mesh.clips]
+    names = {b.name for b in mesh.blend_shapes}
+    shapes, cols, changed = [], [[] for _ in W], 0
+    for si, b in enumerate(mesh.blend_shapes):
+        w = [x[:, si] for x in W]
+        lo = min(float(x.min(initial=0.0)) for x in w)
+        hi = max(float(x.max(initial=0.0)) for x in w)
+        if b.inbetweens or (lo >= 0.0 and hi <= 1.0):
+            shapes.append(b)
+            for c, x in zip(cols, w):
+                c.append(x)
+            continue
+        changed += 1
+        o = b.offsets.astype(np.float64)
+        mp = max(hi, 1.0)
+        shapes.append(dc_replace(b, offsets=(o * mp).astype(np.float32)))
+        for c, x in zip(cols, w):
+            c.append(np.maximum(x, 0.0) / mp)
+        if lo < 0.0:
+            mn = max(-lo, 1.0)
+            name = f"{b.name}_neg"
+            while name in names:
+                name += "_"
+            names.add(name)
+            shapes.append(dc_replace(b, name=name, offsets=(-o * mn).astype(np.float32)))
+            for c, x in zip(cols, w):
+                c.append(np.maximum(-x, 0.0) / mn)
+    if not changed:
+        return mesh, 0
+    clips = tuple(type(c)(c.name, c.times, c.local, np.stack(col, axis=1)) for c, col in zip(mesh.clips, cols))
+    return mesh.replace(blend_shapes=tuple(shapes), clips=clips), changed
+
+
 def _joint_local_points(mesh: SkinnedMesh):
     """Where each joint holds the vertices it moves.
 
@@ -237,8 +388,12 @@ def quantize(mesh: SkinnedMesh):
     """
     from colossus.runtime.schema import Clip
 
+    mesh, reshaped = unit_range_shapes(mesh)
+    r = point_scale(mesh)
+    mesh = fold_point_scale(mesh, r)
     k = root_scale(mesh)
-    mesh = fold_root_scale(mesh, k)
+    js = joint_scales(mesh, k)
+    mesh = fold_root_scale(mesh, k) if np.all(js == k) else fold_joint_scales(mesh, js)
     centers, dist = _joint_local_points(mesh)
     clips, stored, bounds = [], [], {}
     for c in mesh.clips:
@@ -251,8 +406,13 @@ def quantize(mesh: SkinnedMesh):
                           / _posed_size(mesh, c.local[0]))
     info = [dict(i, storage_error_relative=bounds[i["name"]]) if i.get("name") in bounds else i
             for i in mesh.source.get("clip_info", [])]
-    out = mesh.replace(clips=tuple(clips), stored_clips=tuple(stored), root_scale=1.0,
-                       source=dict(mesh.source, clip_info=info))
-    rep = StageReport("quantize", counts={"clips": len(clips), "root_scale": k,
+    src = dict(mesh.source, clip_info=info)
+    if r != 1.0:
+        src["point_scale"] = r
+    out = mesh.replace(clips=tuple(clips), stored_clips=tuple(stored), root_scale=1.0, source=src)
+    rep = StageReport("quantize", counts={"clips": len(clips), "root_scale": k, "point_scale": r,
+                                          "shapes_to_unit_range": reshaped,
+                                          "joint_scales_folded": int(np.count_nonzero(
+                                              js != np.where(mesh.parents < 0, js, js[np.maximum(mesh.parents, 0)]))),
                                           "storage_error_relative": max(bounds.values(), default=0.0)})
     return out, rep

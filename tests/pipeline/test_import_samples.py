@@ -502,7 +502,7 @@ def test_blend_shape_usd_rig_imports_skins_and_validates_as_usd_core_skins_it(tm
     assert r.exit_code == 0, r.output
     s = json.loads(r.stdout)
     assert not [i for i in s["not_carried"] if "morph" in str(i)]  # carried: no record
-    assert s["stages"]["write"]["counts"]["blend_shapes"] == 2
+    assert s["stages"]["write"]["counts"]["blend_shapes"] == 3  # twist_neg: see below
     times = np.arange(0, 9.5, 0.5)  # every key and half-way between
     want = _usd_shaped(src, times)
     got = _usd_shaped(out, times)
@@ -511,7 +511,9 @@ def test_blend_shape_usd_rig_imports_skins_and_validates_as_usd_core_skins_it(tm
     err_asset = float(np.abs(got - want[:, idx]).max())
     assert err_asset <= 1e-6 * size, err_asset / size
     col = load_collider(str(out))
-    assert col.shapes == ["bulge", "twist"]
+    # weights below 0 and above 1 are carried in [0, 1] (Blender clamps shape keys there):
+    # bulge has an in-between (kept as it is), twist's negative range is a mirrored shape
+    assert col.shapes == ["bulge", "twist", "twist_neg"]
     rt = np.array([col.pose(col.clips[0], t).points for t in times], dtype=np.float64)
     err_rt = float(np.abs(rt - got).max())
     assert err_rt <= 1e-6 * size, err_rt / size
@@ -521,7 +523,7 @@ def test_blend_shape_usd_rig_imports_skins_and_validates_as_usd_core_skins_it(tm
     from colossus.runtime.kernels import pose as PK
     c = col.data.clips[0]
     local = PK.locals_at(c, [3.0], col.data.rest_local)[0]
-    p = col.pose_from_joints(local, shape_weights=c.shape_weights([3.0], 2)[0], time=3.0)
+    p = col.pose_from_joints(local, shape_weights=c.shape_weights([3.0], 3)[0], time=3.0)
     assert np.abs(p.points - col.pose(col.clips[0], 3.0).points).max() <= 1e-6 * size
     assert np.all(np.isfinite(p.spheres))
     v = CliRunner().invoke(main, ["validate", str(out), "--source", str(src), "--format", "json"], prog_name="colossus")
