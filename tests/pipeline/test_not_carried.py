@@ -506,8 +506,13 @@ def test_gltf_morph_targets_are_carried_and_match_the_spec_evaluator(tmp_path):
     assert _items(src) == [] and _items(p) == []  # carried: nothing to record
     out = tmp_path / "robot.usda"
     mesh = import_asset(p, out).mesh
-    assert len(mesh.blend_shapes) == 9  # the Head's 3 targets on each of its 3 primitives
+    # the Head's 3 targets on each of its 3 primitives, and a mirrored "_neg" shape for each target
+    # whose cubic weights dip below 0 (weights are carried in [0, 1]: quantize.unit_range_shapes)
+    names = [b.name for b in mesh.blend_shapes]
+    base = [n for n in names if not n.endswith("_neg")]
+    assert len(base) == 9 and all(n.removesuffix("_neg") in base for n in names)
     w = {c.name: c.shape_weights for c in mesh.clips}
+    assert all(x.min() >= 0 and x.max() <= 1 for x in w.values())
     assert np.ptp(w[animated], axis=0).max() > 0.5  # animated
     # the other clips' own weights channels hold every target at 0 (a channel overrides the
     # mesh's default weights, 3.7.2.2)

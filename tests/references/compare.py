@@ -376,8 +376,21 @@ class AssetRig:
         return np.array(out)
 
     def rest(self) -> np.ndarray:
-        """``(V, 3)`` float64 world points at the bind pose."""
-        return self.points(None, [Usd.TimeCode.EarliestTime().GetValue()], at_bind=True)[0]
+        """``(V, 3)`` float64 world points at the bind pose, as the source binds them: where the
+        importer folded the skeleton's scale over its bind into the points (the provenance's
+        ``pointScale``, ``r``: the asset's bind points are ``r`` times the source's about the
+        skeleton's origin, and skin to the same points) they are divided by it."""
+        pts = self.points(None, [Usd.TimeCode.EarliestTime().GetValue()], at_bind=True)[0]
+        r = 1.0
+        for _, _, prim in self._targets:
+            v = (prim.GetCustomDataByKey("colossus") or {}).get("pointScale")
+            if isinstance(v, (int, float)) and v > 0:
+                r = float(v)
+        if r != 1.0:
+            sq = self._targets[0][0]
+            t = np.array(UsdGeom.XformCache().GetLocalToWorldTransform(sq.GetPrim()), dtype=np.float64)[3, :3]
+            pts = (pts - t) / r + t
+        return pts
 
 
 # =============================================================================== comparison
