@@ -314,24 +314,28 @@ class Pose:
             return place.sphere_contacts(self.sphere_contacts(place.to_stage(c[None])[0], r / place.scale, backend))
         return (get_backend(backend) or self.collider.backend).sphere_contacts(self, c, r)
 
-    def track(self, triangles, barycentric) -> np.ndarray:
+    def track(self, triangles, barycentric, world=None) -> np.ndarray:
         """(C, 3) stage positions of surface points (triangle index + barycentric (C, 3|2)).
-        Skins only the parts holding those triangles (lazy, as the queries)."""
+        Skins only the parts holding those triangles (lazy, as the queries).  ``world``: as
+        :meth:`raycast` (the positions in world space)."""
         sp = SurfacePoints(triangles, barycentric)
+        place = None if world is None else Placement.of(world)  # refused before any work
         self._ready_faces(sp.triangles)
         out = np.empty((len(sp), 3))
         QK._surface_points(self._points, self._data.triangles, sp.triangles, sp.barycentric, out)
-        return out
+        return out if place is None else place.to_world(out)
 
-    def surface_frame(self, surface: "SurfacePoints", out=None) -> np.ndarray:
+    def surface_frame(self, surface: "SurfacePoints", out=None, world=None) -> np.ndarray:
         """(6,) float64: the centroid of ``surface``'s points and the unit mean of their
         triangles' unit normals (counter-clockwise = outward; zeros when they cancel or there are
         none) - ``track(...).mean(0)`` and the normalised ``face_normals(...).sum(0)`` in one
         pass, skinning only the parts holding the triangles.  A contact patch's frame: how the
         patch moves and turns from one pose to the next (:mod:`runtime.controller` carries its
-        player with it).  ``out``: an optional (6,) float64 array to write into."""
+        player with it).  ``out``: an optional (6,) float64 array to write into.  ``world``: as
+        :meth:`raycast` (the centroid carried by it, the normal by its rotation; zeros stay zeros)."""
         if not isinstance(surface, SurfacePoints):
             raise TypeError(f"surface must be SurfacePoints, got {type(surface).__name__}")
+        place = None if world is None else Placement.of(world)
         if out is None:
             out = np.empty(6)
         elif not (isinstance(out, np.ndarray) and out.shape == (6,) and out.dtype == np.float64
@@ -341,6 +345,9 @@ class Pose:
             self._ready_faces(surface.triangles)
         if not QK._surface_frame(self._points, self._data.triangles, surface.triangles, surface.barycentric, out):
             raise ValueError(f"triangle index out of range 0..{len(self._data.triangles) - 1}")
+        if place is not None:
+            out[:3] = place.to_world(out[None, :3])[0]
+            out[3:] = out[3:] @ place.rotation.T  # a unit normal stays unit under a rotation
         return out
 
     def face_normals(self, triangles=None) -> np.ndarray:

@@ -816,6 +816,18 @@ def test_queries_in_world_space_equal_queries_on_inputs_transformed_by_hand(crea
     np.testing.assert_allclose(ws[:, 3], sph[:, 3] * scale)
     assert Placement.of(place) is place
     np.testing.assert_array_equal(pose.raycast(o_world, d_world, world=place).distance, hw.distance)
+    # tracked surface points and a contact patch's frame, in world space
+    from colossus.runtime import SurfacePoints
+    tri, bc = hs.triangle[h], hs.barycentric[h]
+    ts = pose.track(tri, bc)
+    np.testing.assert_allclose(pose.track(tri, bc, world=W), ts @ W[:3, :3].T + W[:3, 3],
+                               atol=1e-9 * scale * size + 1e-9 * 250)
+    np.testing.assert_allclose(pose.track(tri, bc, world=W), hw.point[h], atol=1e-6 * scale * size)
+    sp = SurfacePoints(tri, bc)
+    fs, fw = pose.surface_frame(sp).copy(), pose.surface_frame(sp, world=place)
+    np.testing.assert_allclose(fw[:3], W[:3, :3] @ fs[:3] + W[:3, 3], atol=1e-9 * scale * size + 1e-9 * 250)
+    np.testing.assert_allclose(fw[3:], W[:3, :3] @ fs[3:] / scale, atol=1e-9)
+    assert abs(np.linalg.norm(fw[3:]) - 1.0) < 1e-9
 
 
 @pytest.mark.parametrize("bad, match", [
