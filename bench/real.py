@@ -320,6 +320,58 @@ def _lbs_time(points, jidx, jw, xforms, serial, repeat=3):
     return best
 
 
+def _shape_weights(path, clip_times):
+    """Per frame of ``clip_times`` ([(clip name, times)]), usd-core's sub-shape weights of the
+    asset's skinned mesh (the clip's variant selected, ``AnimQuery.ComputeBlendShapeWeights``,
+    remapped to the mesh, ``BlendShapeQuery.ComputeSubShapeWeights``), the query and its offsets
+    and indices: what the shapes-then-skinning baseline is given (computed outside its timing, as
+    the joint transforms are)."""
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    stage = Usd.Stage.Open(path)
+    vset = stage.GetDefaultPrim().GetVariantSets().GetVariantSet("clip")
+    frames, bq = [], None
+    for name, times in clip_times:
+        if vset:
+            vset.SetVariantSelection(name)
+        cache = UsdSkel.Cache()
+        root = next(UsdSkel.Root(p) for p in stage.Traverse() if p.IsA(UsdSkel.Root))
+        cache.Populate(root, Usd.PrimDefaultPredicate)
+        (binding,) = cache.ComputeSkelBindings(root, Usd.PrimDefaultPredicate)
+        sq = cache.GetSkelQuery(binding.GetSkeleton())
+        (q,) = [t for t in binding.GetSkinningTargets() if t.GetPrim().IsA(UsdGeom.Mesh)]
+        bq = UsdSkel.BlendShapeQuery(UsdSkel.BindingAPI(q.GetPrim()))
+        for t in times:
+            w = q.GetBlendShapeMapper().Remap(sq.GetAnimQuery().ComputeBlendShapeWeights(Usd.TimeCode(float(t))))
+            frames.append(bq.ComputeSubShapeWeights(w))
+    return bq, bq.ComputeSubShapePointOffsets(), bq.ComputeBlendShapePointIndices(), frames
+
+
+def _shapes_lbs_time(path, clip_times, points, jidx, jw, xforms, serial, repeat=3):
+    """Seconds of usd-core's blend shapes then linear skinning (``BlendShapeQuery.ComputeDeformedPoints``
+    then ``UsdSkel.SkinPointsLBS``) over every frame (best of ``repeat``): the baseline of a
+    character with blend shapes (UsdSkel's order: shapes, then skinning)."""
+    from pxr import Gf, UsdSkel, Vt
+
+    from colossus.runtime import schema
+    bq, offsets, indices, weights = _shape_weights(path, clip_times)
+    ji = Vt.IntArray.FromNumpy(np.ascontiguousarray(jidx, dtype=np.int32).ravel())
+    w = Vt.FloatArray.FromNumpy(np.ascontiguousarray(jw, dtype=np.float32).ravel())
+    k = jidx.shape[1]
+    gb = Gf.Matrix4d(1)
+    mats = [Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(m)) for m in schema.row_vector(xforms)]
+    src = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(points, dtype=np.float32))
+    best = np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        for m, (sw, bi, si) in zip(mats, weights):
+            p = Vt.Vec3fArray(src)
+            bq.ComputeDeformedPoints(sw, bi, si, indices, offsets, p)
+            UsdSkel.SkinPointsLBS(gb, m, ji, w, k, p, serial)
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
 def validate_row(ch: Character, repeat: int = 2) -> dict:
     """The whole proof ``colossus validate`` runs (read, sampled proof, continuous certificate)
     on one character, beside ``UsdSkel.SkinPointsLBS`` skinning every vertex at every frame it
@@ -361,6 +413,10 @@ def validate_row(ch: Character, repeat: int = 2) -> dict:
     x = np.concatenate(xs)
     par = _lbs_time(rig.points, rig.joint_indices, rig.joint_weights, x, False)
     ser = _lbs_time(rig.points, rig.joint_indices, rig.joint_weights, x, True)
+    shaped = None
+    if rig.shapes is not None and len(rig.shapes) and rig.skinning_method == "classicLinear":
+        ct = [(c.name, c.times) for c in a.clips if (clips is None or c.name in clips) and len(c.times)]
+        shaped = _shapes_lbs_time(ch.asset, ct, rig.points, rig.joint_indices, rig.joint_weights, x, False)
     passed = all(r.failing_times == 0 for r in proof.results) and not proof.between
     return {"name": ch.name, "vertices": len(rig.points), "parts": rig.P, "frames": len(x), "read_s": t_read,
             "sampled_s": t_sampled, "joints_s": t_joints, "continuous_s": t_cont,
@@ -370,7 +426,8 @@ def validate_row(ch: Character, repeat: int = 2) -> dict:
             "whole_vs_lbs": par / (t_read + t_sampled + t_cont), "ref_sampled_s": ref_sampled,
             "ref_continuous_s": ref_cont, "ref_same": same, "ref_sampled_vs_lbs": par / ref_sampled,
             "ref_continuous_over_sampled": ref_cont / ref_sampled,
-            "ref_whole_vs_lbs": par / (t_read + ref_sampled + ref_cont)}
+            "ref_whole_vs_lbs": par / (t_read + ref_sampled + ref_cont),
+            "shapes": 0 if rig.shapes is None else len(rig.shapes), "shapes_lbs_parallel_s": shaped}
 
 
 def _s(sec: float) -> str:
@@ -391,6 +448,10 @@ def format_validate_rows(rows) -> str:
                   f"    sampled proof     {_s(r['sampled_s']):>10} = {r['sampled_vs_lbs']:6.2f}x the speed of SkinPointsLBS   "
                   f"[{tiers_text(r['tiers'])}]; without reading the joint transforms ({_s(r['joints_s'])}, "
                   f"given to the baseline) {r['sampled_no_read_vs_lbs']:.2f}x",
+                  *([f"    blend shapes ({r['shapes']}): usd-core's shapes then SkinPointsLBS (BlendShapeQuery."
+                     f"ComputeDeformedPoints, parallel) {_s(r['shapes_lbs_parallel_s'])}: the sampled proof is "
+                     f"{r['shapes_lbs_parallel_s'] / r['sampled_s']:.2f}x its speed"]
+                    if r.get("shapes_lbs_parallel_s") else []),
                   f"    continuous cert.  {_s(r['continuous_s']):>10} = {r['continuous_over_sampled']:6.2f}x the sampled "
                   f"proof   [{intervals_text(r['intervals'])}]",
                   f"    whole proof (read {_s(r['read_s'])} + sampled + continuous) = {r['whole_vs_lbs']:6.2f}x "
