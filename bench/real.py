@@ -298,9 +298,11 @@ def format_import_rows(items) -> str:
     return "\n".join(lines)
 
 
-def _lbs_time(points, jidx, jw, xforms, serial, repeat=3):
+def _lbs_time(points, jidx, jw, xforms, serial, repeat=3, shapes=None):
     """Seconds of ``UsdSkel.SkinPointsLBS`` over every frame of ``xforms`` (F, J, 4, 4)
-    column-vector skinning transforms (best of ``repeat``)."""
+    column-vector skinning transforms (best of ``repeat``); ``shapes`` (:func:`_shape_weights`):
+    each frame's points first deformed by usd-core's blend shapes (``BlendShapeQuery.
+    ComputeDeformedPoints``, UsdSkel's order: shapes, then skinning)."""
     from pxr import Gf, UsdSkel, Vt
 
     from colossus.runtime import schema
@@ -310,11 +312,14 @@ def _lbs_time(points, jidx, jw, xforms, serial, repeat=3):
     gb = Gf.Matrix4d(1)
     mats = [Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(m)) for m in schema.row_vector(xforms)]
     src = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(points, dtype=np.float32))
+    bq, offsets, indices, weights = shapes if shapes is not None else (None, None, None, [None] * len(mats))
     best = np.inf
     for _ in range(repeat):
         t0 = time.perf_counter()
-        for m in mats:
+        for m, sub in zip(mats, weights):
             p = Vt.Vec3fArray(src)
+            if bq is not None:
+                bq.ComputeDeformedPoints(*sub, indices, offsets, p)
             UsdSkel.SkinPointsLBS(gb, m, ji, w, k, p, serial)
         best = min(best, time.perf_counter() - t0)
     return best
@@ -345,31 +350,6 @@ def _shape_weights(path, clip_times):
             w = q.GetBlendShapeMapper().Remap(sq.GetAnimQuery().ComputeBlendShapeWeights(Usd.TimeCode(float(t))))
             frames.append(bq.ComputeSubShapeWeights(w))
     return bq, bq.ComputeSubShapePointOffsets(), bq.ComputeBlendShapePointIndices(), frames
-
-
-def _shapes_lbs_time(path, clip_times, points, jidx, jw, xforms, serial, repeat=3):
-    """Seconds of usd-core's blend shapes then linear skinning (``BlendShapeQuery.ComputeDeformedPoints``
-    then ``UsdSkel.SkinPointsLBS``) over every frame (best of ``repeat``): the baseline of a
-    character with blend shapes (UsdSkel's order: shapes, then skinning)."""
-    from pxr import Gf, UsdSkel, Vt
-
-    from colossus.runtime import schema
-    bq, offsets, indices, weights = _shape_weights(path, clip_times)
-    ji = Vt.IntArray.FromNumpy(np.ascontiguousarray(jidx, dtype=np.int32).ravel())
-    w = Vt.FloatArray.FromNumpy(np.ascontiguousarray(jw, dtype=np.float32).ravel())
-    k = jidx.shape[1]
-    gb = Gf.Matrix4d(1)
-    mats = [Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(m)) for m in schema.row_vector(xforms)]
-    src = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(points, dtype=np.float32))
-    best = np.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        for m, (sw, bi, si) in zip(mats, weights):
-            p = Vt.Vec3fArray(src)
-            bq.ComputeDeformedPoints(sw, bi, si, indices, offsets, p)
-            UsdSkel.SkinPointsLBS(gb, m, ji, w, k, p, serial)
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def validate_row(ch: Character, repeat: int = 2) -> dict:
@@ -416,7 +396,8 @@ def validate_row(ch: Character, repeat: int = 2) -> dict:
     shaped = None
     if rig.shapes is not None and len(rig.shapes) and rig.skinning_method == "classicLinear":
         ct = [(c.name, c.times) for c in a.clips if (clips is None or c.name in clips) and len(c.times)]
-        shaped = _shapes_lbs_time(ch.asset, ct, rig.points, rig.joint_indices, rig.joint_weights, x, False)
+        shaped = _lbs_time(rig.points, rig.joint_indices, rig.joint_weights, x, False,
+                           shapes=_shape_weights(ch.asset, ct))
     passed = all(r.failing_times == 0 for r in proof.results) and not proof.between
     return {"name": ch.name, "vertices": len(rig.points), "parts": rig.P, "frames": len(x), "read_s": t_read,
             "sampled_s": t_sampled, "joints_s": t_joints, "continuous_s": t_cont,
