@@ -29,3 +29,37 @@ def test_own_rate_is_read_off_float32_keys_and_refused_off_grid():
     assert choose_fps([keys], hint=24.0) == 37.0             # the declared rate does not hold them
     assert choose_fps([np.array([0.0, 0.013, 0.9])]) == 30.0  # no regular grid: the default
     assert choose_fps([np.arange(0, 40, 2) / 37]) == 18.5     # every other frame: still its grid
+
+
+def test_weights_resampling_bound_holds_and_is_exact_for_one_linear_shape():
+    """The blend-shape part of a clip's resampling bound (``timeline._weights_resampling_bound``):
+    at source keys between frames it is never below the true displacement gap (shapes with
+    in-betweens, several shapes on a vertex, a skinning that scales by 2), and for one shape
+    without in-betweens it is that gap exactly (1% less would fail)."""
+    from colossus.pipeline.model import BlendShape, kernel_shapes
+    from colossus.pipeline.readers.scene.timeline import _weights_resampling_bound
+    from colossus.runtime.kernels import skin as SK
+
+    rng = np.random.default_rng(3)
+    n = 6
+    shapes = [BlendShape("a", np.arange(n), rng.normal(size=(n, 3)).astype(np.float32),
+                         ((0.4, rng.normal(size=(n, 3)).astype(np.float32)),)),
+              BlendShape("b", np.array([1, 3, 4]), rng.normal(size=(3, 3)).astype(np.float32))]
+    frames = np.arange(5.0)
+    W = rng.uniform(-0.5, 1.5, size=(5, 2))
+    key_frames = np.array([0.5, 1.25, 2.9, 3.6])
+    W_keys = rng.uniform(-0.5, 1.5, size=(4, 2))
+    local = np.tile(np.diag([2.0, 2.0, 2.0, 1.0]), (4, 1, 1, 1))  # (K, 1 joint, 4, 4): scale 2
+    parents, bind = np.array([-1]), np.eye(4)[None]
+    b = _weights_resampling_bound(frames, W, key_frames, W_keys, shapes, n, local, parents, bind)
+    ks = kernel_shapes(shapes, n)
+    grid = np.stack([np.interp(key_frames, frames, W[:, s]) for s in range(2)], 1)
+    zero = np.zeros((n, 3), np.float32)
+    gap = 2.0 * np.linalg.norm(SK.shape_points(zero, ks, W_keys) - SK.shape_points(zero, ks, grid), axis=2).max()
+    assert gap <= b * (1 + 1e-9) and gap > 0
+    one = [BlendShape("c", np.arange(n), rng.normal(size=(n, 3)).astype(np.float32))]
+    b1 = _weights_resampling_bound(frames, W[:, :1], key_frames, W_keys[:, :1], one, n, local, parents, bind)
+    ks1 = kernel_shapes(one, n)
+    gap1 = 2.0 * np.linalg.norm(SK.shape_points(zero, ks1, W_keys[:, :1])
+                                - SK.shape_points(zero, ks1, grid[:, :1]), axis=2).max()
+    assert gap1 <= b1 * (1 + 1e-9) and 0.99 * b1 < gap1

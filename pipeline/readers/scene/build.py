@@ -25,7 +25,8 @@ from ...tolerances import GRID_KEY_FRAMES, SOURCE_WEIGHT_SUM, model_scale
 from ...xforms import decompose_trs
 from ..common import clip_name, pack_influences
 from .graph import Scene, _ancestors, _world, check_scene
-from .timeline import MAX_FRAMES, _joint_locals, _off_grid, _resampling_bound, choose_fps, grid_frames
+from .timeline import (MAX_FRAMES, _joint_locals, _off_grid, _resampling_bound, _weights_resampling_bound,
+                       choose_fps, grid_frames)
 
 
 def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict | None = None) -> SkinnedMesh:
@@ -66,7 +67,7 @@ def build(scene: Scene, path, meshes=None, fps=None, budget=None, source: dict |
     positions, triangles, ji, jw, mesh_info, weights_normalised, shapes, shape_of = _geometry(
         all_meshes, chosen, names, skel, unweighted, parents, nworld, bind, budget, notes)
     clips, clip_info, rate = _clips(scene, path, fps, budget, skel, parents, rest, bind, positions, ji, jw,
-                                    shape_of, len(shapes))
+                                    shape_of, len(shapes), shapes)
     return _skinned_mesh(scene, source, all_meshes, chosen, skel, bind, rest, positions, triangles, ji, jw,
                          mesh_info, weights_normalised, clips, clip_info, rate, notes, shapes)
 
@@ -421,7 +422,7 @@ def _sample_weights(a, frames, rate, shape_of, S, key_tol):
 
 
 def _clips(scene: Scene, path, fps, budget, skel: _Skeleton, parents, rest, bind, positions, ji, jw,
-           shape_of=None, S=0):
+           shape_of=None, S=0, shapes=()):
     """``(clips, clip_info, rate)``: every animation with keys sampled on the one frame grid of
     ``rate`` frames per second, with its summary row (and its resampling error bound when keys
     fall between frames)."""
@@ -480,6 +481,10 @@ def _clips(scene: Scene, path, fps, budget, skel: _Skeleton, parents, rest, bind
             info["error_bound"] = _resampling_bound(frames, rate, jl, off_keys, jl_keys, jparents, bind,
                                                     positions, ji, jw)
         W = _sample_weights(a, frames, rate, shape_of or {}, S, GRID_KEY_FRAMES / rate) if S else None
+        if W is not None and len(off_keys):  # the weights' resampling error adds to the joints'
+            W_keys = _sample_weights(a, off_keys * rate, rate, shape_of or {}, S, GRID_KEY_FRAMES / rate)
+            info["error_bound"] += _weights_resampling_bound(frames, W, off_keys * rate, W_keys, shapes,
+                                                             len(positions), jl_keys, jparents, bind)
         clips.append(_grid_clip(name, frames, jl, W))
         clip_info.append(info)
     if not clips and nj:

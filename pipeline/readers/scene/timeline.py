@@ -220,3 +220,36 @@ def _resampling_bound(frames, rate, jl, key_seconds, jl_keys, parents, bind, pos
         off = np.linalg.norm(dj[:, :3, :3] @ c + dj[:, :3, 3], axis=1)
         bound = max(bound, float(np.max(lin * r + off)))
     return bound
+
+
+def _weights_resampling_bound(frames, W, key_frames, W_keys, shapes, n, jl_keys, parents, bind) -> float:
+    """Upper bound, in skeleton units, of how far the blend shapes move any vertex off the source's
+    pose at the source key times that fall between frames (added to :func:`_resampling_bound`'s:
+    the skinned point is linear in the shaped point, so the two errors add).
+
+    The asset lerps each shape's weight between frames (``W`` (f, S) on ``frames``); the source
+    is at ``W_keys`` (K, S) at ``key_frames`` (frame units).  A shape's displacement is piecewise
+    linear in its weight (:class:`runtime.kernels.skin.Shapes`: knots at the in-betweens'
+    weights, extrapolated past the ends), so a weight off by ``dw`` moves a vertex by at most
+    ``dw`` times the shape's largest slope at that vertex, ``max |o_k+1 - o_k| / (w_k+1 - w_k)``
+    over its consecutive knots; summed over shapes and carried by the skinning, whose linear
+    part is at most the largest ``||M_j||`` of the source's pose at that key."""
+    from ...model import kernel_shapes
+
+    if not len(key_frames) or W is None or not W.shape[1]:
+        return 0.0
+    ks = kernel_shapes(shapes, n)  # n: the mesh's point count
+    grid = np.stack([np.interp(key_frames, frames, W[:, s]) for s in range(W.shape[1])], axis=1)
+    dw = np.abs(W_keys - grid)  # (K, S)
+    slope = []
+    for s in range(len(ks)):
+        k, o = ks.knots[s], ks.knot_offsets[s]
+        d = np.linalg.norm(np.diff(o, axis=0), axis=2) / np.diff(k)[:, None]  # (segments, m)
+        slope.append(d.max(axis=0))
+    skin = skel_transforms(jl_keys, parents) @ np.linalg.inv(bind)
+    norm = np.linalg.norm(skin[..., :3, :3], ord=2, axis=(-2, -1)).max(axis=1)  # (K,)
+    acc = np.zeros((len(key_frames), n))
+    for s in range(len(ks)):
+        if len(slope[s]):
+            acc[:, ks.indices[s]] += dw[:, s:s + 1] * slope[s][None]
+    return float((acc.max(axis=1, initial=0.0) * norm).max(initial=0.0))
