@@ -88,7 +88,9 @@ JOINT_SCALE_STEP = 1e-5
 
 def joint_scales(mesh: SkinnedMesh, k: float) -> np.ndarray:
     """(b,) the uniform scale ``s_j`` to divide out of each joint's space: ``k`` (:func:`root_scale`)
-    at the roots, then down each chain the parent's, times the joint's own step where its bind
+    at the roots (the root's own bind scale where it differs from ``k`` by more than
+    :data:`JOINT_SCALE_STEP`: the bind is made rigid, and the animation keeps the ratio, rounded
+    to half precision within the clip's stated storage bound), then down each chain the parent's, times the joint's own step where its bind
     transform's uniform scale (``|det|^(1/3)`` of its linear part) differs from its parent's by
     more than :data:`JOINT_SCALE_STEP` (a centimetre subtree under a metre root, an armature
     scaled below its root joint)."""
@@ -98,8 +100,8 @@ def joint_scales(mesh: SkinnedMesh, k: float) -> np.ndarray:
     from colossus.runtime.schema import parents_first
     for j in parents_first(mesh.parents):
         p = mesh.parents[j]
-        if p < 0:
-            s[j] = k
+        if p < 0:  # k, or the root's own bind scale where that differs (its bind then rigid too)
+            s[j] = k if u[j] > 0 and abs(u[j] / k - 1.0) <= JOINT_SCALE_STEP else (u[j] if u[j] > 0 else k)
             continue
         step = u[j] / u[p] if u[p] > 0 else 1.0
         s[j] = s[p] * step if np.isfinite(step) and step > 0 and abs(step - 1.0) > JOINT_SCALE_STEP else s[p]

@@ -581,3 +581,58 @@ def test_stretched_chain_written_passes_the_continuous_certificate(tmp_path):
     assert rep.passed and not errors, errors[:3]
     n = rep.stats["frameproof"]["intervals"]
     assert n["failed"] == n["undecided"] == 0, n
+
+
+def _unfolded(mesh, C, r=1.0):
+    """``mesh`` (rigid binds) rewritten with joint spaces ``C_j`` (uniform scales, (b,)) and its
+    points ``1 / r`` as large: the same skinned points at every frame, binds ``D^-1 B C`` scaled
+    (the inverse of quantize's folds; a source as an exporter writes a scaled skeleton)."""
+    from dataclasses import replace as dc_replace
+
+    cp = np.where(mesh.parents < 0, 1.0, C[np.maximum(mesh.parents, 0)])
+
+    def loc(L):
+        out = L.copy()
+        out[..., :3, :3] *= (C / cp)[:, None, None]
+        out[..., :3, 3] /= cp[:, None]
+        return out
+
+    bind = mesh.bind_transforms.copy()
+    bind[:, :3, :3] *= C[:, None, None]
+    bind[:, :3, :] /= r
+    G = mesh.geom_bind.copy()
+    G[:3, 3] /= r
+    clips = tuple(dc_replace(c, local=loc(c.local)) for c in mesh.clips)
+    return mesh.replace(positions=(mesh.positions / r).astype(np.float32), geom_bind=G, bind_transforms=bind,
+                        rest_transforms=loc(mesh.rest_transforms), clips=clips)
+
+
+@pytest.mark.parametrize("case", ["subtree x100", "animated x1.662 over the bind", "root bind scale only"])
+def test_quantize_makes_every_bind_rigid_and_keeps_the_skinned_points(case):
+    """Quantize's changes of variables (issue 24: Blender's bones hold no scale): from a rig whose
+    binds carry uniform scales (a centimetre subtree, a skeleton animated at 1.662 its bind, a root
+    bound at 0.5 and animated at 1) the asset's binds are rigid, and its stored clips skin every
+    frame to the source's points within the storage bound each clip states."""
+    from colossus.pipeline.model import skel_transforms, skin_points
+    from colossus.pipeline.stages.quantize import quantize
+    from colossus.pipeline.tolerances import model_scale
+
+    base = synth.make_tube()
+    C, r = {"subtree x100": (np.array([1.0, 100.0, 100.0]), 1.0),
+            "animated x1.662 over the bind": (np.array([1.662, 1.662, 1.662]), 1.662),
+            "root bind scale only": (np.array([0.5, 0.5, 0.5]), 1.0)}[case]
+    src = _unfolded(base, C, r)
+    sv = np.linalg.svd(np.concatenate([src.bind_transforms[:, :3, :3], src.clips[0].local[:, 0, :3, :3]]),
+                       compute_uv=False)
+    assert np.abs(sv - 1).max() > 0.3  # the source's binds (or its animated root) are scaled
+    out, rep = quantize(src)
+    sv = np.linalg.svd(out.bind_transforms[:, :3, :3], compute_uv=False)
+    assert np.abs(sv - 1).max() < 1e-9, (case, sv)
+    for c_src, c_out, info in zip(src.clips, out.clips, out.source.get("clip_info") or [{}] * 2):
+        want = skin_points(src, skel_transforms(c_src.local, src.parents))
+        got = skin_points(out, skel_transforms(c_out.local, out.parents))
+        size = model_scale(want[0])
+        stated = [i["storage_error_relative"] for i in out.source["clip_info"] if i["name"] == c_src.name] \
+            if out.source.get("clip_info") else []
+        allowed = (stated[0] if stated else 0.0) * size + 1e-6 * size
+        assert np.abs(got - want).max() <= allowed, (case, c_src.name, np.abs(got - want).max() / size)
