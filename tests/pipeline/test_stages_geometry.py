@@ -557,9 +557,12 @@ def test_stored_clips_error_within_its_bound_and_far_below_plain_rounding(k):
         plain.append(type(c)(c.name, c.times, m))
     rounded = naive.skin_points(mesh, naive.all_poses(mesh.replace(clips=tuple(plain))))
     plain_err = np.linalg.norm(rounded - exact, axis=-1).max() / size
-    # (measured: plain 2.9e-4 / 3.3e-4 of the size, corrected 7.4e-5 / 5.0e-5, bounds 1.3e-4 / 1.4e-4
-    # on this tube, where every joint weighs on every vertex: the worst case for the correction)
-    assert plain_err > 1e-4 and err.max() < plain_err / 3 and max(bounds.values()) < plain_err / 2, (
+    # (measured: plain 2.9e-4 / 3.3e-4 of the size, corrected 9.8e-5 / 6.7e-5, bounds 2.0e-4 / 2.0e-4
+    # on this tube, where every joint weighs on every vertex: the worst case for the correction.  The
+    # root keeps its own bind scale (k, not the median of its stretched frames, 1.0012 k), so the bind
+    # is rigid as Blender needs it; dividing the frames' median out instead gave 7.4e-5 / 5.0e-5 and
+    # bounds 1.3e-4 / 1.4e-4, with the root's bind 0.12 % off rigid: 1e-3 x size in Blender)
+    assert plain_err > 1e-4 and err.max() < plain_err / 2.5 and max(bounds.values()) < plain_err / 1.4, (
         plain_err, err.max(), bounds)
 
 
