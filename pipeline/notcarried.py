@@ -17,9 +17,9 @@ import when there is any.
 The ``what`` ids (README, "Not carried"):
 
 ========================  ======================================================================
-``morph_targets``         FBX blend shapes on the assimp road, and every blend shape of a
-                          simplified proxy (glTF morph targets, USD ``skel:blendShapes`` and FBX
-                          blend channels on the ufbx road are carried as UsdSkel blend shapes)
+``morph_targets``         FBX blend shapes on the assimp road (glTF morph targets, USD
+                          ``skel:blendShapes`` and FBX blend channels on the ufbx road are carried
+                          as UsdSkel blend shapes, by a simplified proxy too)
 ``fbx_evaluation``        (ufbx road) joint keys that do not reproduce ufbx's native evaluation
 ``fbx_skinning_type``     FBX Skin ``SkinningType`` DualQuaternion, or Blend with non-zero
                           per-vertex ``BlendWeights`` (we skin linearly)

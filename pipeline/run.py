@@ -331,8 +331,6 @@ def build_collider(src, settings: ImportSettings | None = None, progress=None, s
         return mesh, reports
     if s.proxy:
         mesh = step("simplify", lambda: simplify(mesh, s.target_faces, s.max_deviation, s.max_influences))
-        if strict and mesh.source.get(notcarried.SOURCE_KEY):  # the proxy dropped the blend shapes
-            raise InputError(src, notcarried.strict_refusal(mesh.source[notcarried.SOURCE_KEY]))
         mesh = _degenerate_again(mesh, reports)
     if stop_after == "simplify":
         return mesh, reports

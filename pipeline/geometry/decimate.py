@@ -42,7 +42,7 @@ from ..model import SkinnedMesh
 from ..tolerances import SIMPLIFY_BONE_BOUNDARY
 from .collapse import apply_collapses, vertex_quadrics
 from .deviation import Deviation
-from .transfer import transfer_weights
+from .transfer import transfer_shapes, transfer_weights
 
 #: The library is asked for this fraction of the target, so that refused collapses still leave
 #: enough history to reach the target ...
@@ -213,9 +213,10 @@ class Decimator:
         pshell = np.full(len(r.positions), -1, np.int64)
         live = r.vertex_map >= 0
         pshell[r.vertex_map[live]] = self.vshell[live]
-        ji, jw, _ = transfer_weights(self.mesh, r.positions, self.max_influences, pshell, self.shell)
+        ji, jw, _, tri, bary = transfer_weights(self.mesh, r.positions, self.max_influences, pshell, self.shell)
+        shapes = transfer_shapes(self.mesh, tri, bary) if self.mesh.blend_shapes else ()
         proxy = self.mesh.replace(positions=r.positions, triangles=r.triangles.astype(np.int32), joint_indices=ji,
-                                  joint_weights=jw, parts=None)
+                                  joint_weights=jw, parts=None, blend_shapes=shapes)
         acc = self.col[r.accepted]
         crossing = int(np.count_nonzero(self.dominant[acc[:, 0]] != self.dominant[acc[:, 1]]))
         return Candidate(proxy, r.looked_at, int(r.accepted.sum()), int(r.looked_at - r.accepted.sum()), crossing)

@@ -1,7 +1,8 @@
 """How far a collision proxy strays from the full skinned mesh: :func:`deviation`.
 
 On the bind pose and every frame of every clip (:class:`Poses`, :func:`mesh_poses`), both meshes
-are skinned (:func:`colossus.runtime.kernels.skin.skin_frames`, the one skinning kernel, once per
+(their blend shapes applied first at the clip's weights: the proxy carries the full mesh's,
+:func:`colossus.pipeline.geometry.transfer.transfer_shapes`) are skinned (:func:`colossus.runtime.kernels.skin.skin_frames`, the one skinning kernel, once per
 pose for both directions) and the two-sided distance between the skinned surfaces is bounded from
 above by :func:`colossus.pipeline.geometry.surface_distance.deviation_bound` (a Lipschitz bound and
 a convexity bound per piece, pieces subdivided where they are more than ``DEVIATION_REFINE`` above
@@ -34,19 +35,25 @@ class Poses:
 
     mats : (F, b, 4, 4) float64 skinning matrices (``skel @ inv(bind) @ geom_bind``: mesh space
     to skeleton space); clip : list of clip name (None for the bind pose); frame : (F,) int;
-    time : (F,) float64 time codes (nan for the bind pose)."""
+    time : (F,) float64 time codes (nan for the bind pose); weights : (F, S) float64 blend-shape
+    weights at each pose (0 at the bind pose; S = 0 without shapes)."""
 
     mats: np.ndarray
     clip: list
     frame: np.ndarray
     time: np.ndarray
+    weights: np.ndarray = None
+
+    def __post_init__(self):
+        if self.weights is None:
+            self.weights = np.zeros((len(self.mats), 0))
 
     def label(self, i: int) -> str:
         return "bind pose" if self.clip[i] is None else f"{self.clip[i]} frame {int(self.frame[i])}"
 
     def subset(self, idx) -> "Poses":
         idx = np.asarray(idx)
-        return Poses(self.mats[idx], [self.clip[i] for i in idx], self.frame[idx], self.time[idx])
+        return Poses(self.mats[idx], [self.clip[i] for i in idx], self.frame[idx], self.time[idx], self.weights[idx])
 
 
 def mesh_poses(mesh: SkinnedMesh) -> Poses:
@@ -54,14 +61,17 @@ def mesh_poses(mesh: SkinnedMesh) -> Poses:
     inv_bind = np.linalg.inv(mesh.bind_transforms)
     skel = [mesh.bind_transforms[None]]
     clip, frame, times = [None], [0], [np.nan]
+    weights = [np.zeros((1, len(mesh.blend_shapes)))]
     for c in mesh.clips:
         skel.append(skel_transforms(c.local, mesh.parents))
         clip += [c.name] * c.frame_count
         frame += list(range(c.frame_count))
         times += list(c.times)
+        weights.append(np.asarray(c.shape_weights, dtype=np.float64).reshape(c.frame_count, -1))
     S = np.concatenate(skel)
     mats = S @ inv_bind[None] @ mesh.geom_bind
-    return Poses(np.ascontiguousarray(mats), clip, np.array(frame, np.int64), np.array(times, np.float64))
+    return Poses(np.ascontiguousarray(mats), clip, np.array(frame, np.int64), np.array(times, np.float64),
+                 np.concatenate(weights) if mesh.blend_shapes else None)
 
 
 def rest_skel(mesh: SkinnedMesh) -> np.ndarray:
@@ -139,7 +149,19 @@ def deviation(full: SkinnedMesh, proxy: SkinnedMesh, poses: Poses | None = None,
         from colossus.runtime.kernels.skin import fold_method
         G = full.geom_bind
         poses = Poses(fold_method(full.skinning_method, poses.mats @ np.linalg.inv(G), G), poses.clip, poses.frame,
-                      poses.time)
+                      poses.time, poses.weights)
+    # blend shapes (the proxy carries the full mesh's, transferred): each pose's points displaced by
+    # them first, as UsdSkel and the one kernel skin them
+    shaped = bool(full.blend_shapes) and poses.weights.shape[1] == len(full.blend_shapes) and np.any(poses.weights)
+    if shaped:
+        from colossus.runtime.kernels.skin import shape_points
+
+        from ..model import kernel_shapes
+        ks_a, ks_b = kernel_shapes(full.blend_shapes, full.vertex_count), kernel_shapes(proxy.blend_shapes,
+                                                                                          proxy.vertex_count)
+
+    def pts(mesh, ks, idx):
+        return shape_points(mesh.positions, ks, poses.weights[idx]) if shaped else mesh.positions
     F = len(poses.mats)
     nv = full.vertex_count + proxy.vertex_count
     cache = {}
@@ -147,8 +169,10 @@ def deviation(full: SkinnedMesh, proxy: SkinnedMesh, poses: Poses | None = None,
         cache["a"] = np.empty((F, full.vertex_count, 3), np.float32)
         cache["b"] = np.empty((F, proxy.vertex_count, 3), np.float32)
         for ch in _chunks(F, nv):
-            cache["a"][ch] = skin_frames(full.positions, full.joint_indices, full.joint_weights, poses.mats[ch])
-            cache["b"][ch] = skin_frames(proxy.positions, proxy.joint_indices, proxy.joint_weights, poses.mats[ch])
+            cache["a"][ch] = skin_frames(pts(full, ks_a if shaped else None, ch), full.joint_indices,
+                                         full.joint_weights, poses.mats[ch])
+            cache["b"][ch] = skin_frames(pts(proxy, ks_b if shaped else None, ch), proxy.joint_indices,
+                                         proxy.joint_weights, poses.mats[ch])
 
     def frames(idx):
         if cache:
@@ -156,8 +180,8 @@ def deviation(full: SkinnedMesh, proxy: SkinnedMesh, poses: Poses | None = None,
                 return cache["a"][idx[0]:idx[-1] + 1], cache["b"][idx[0]:idx[-1] + 1]
             return cache["a"][idx], cache["b"][idx]
         m = poses.mats[idx]
-        return (skin_frames(full.positions, full.joint_indices, full.joint_weights, m),
-                skin_frames(proxy.positions, proxy.joint_indices, proxy.joint_weights, m))
+        return (skin_frames(pts(full, ks_a if shaped else None, idx), full.joint_indices, full.joint_weights, m),
+                skin_frames(pts(proxy, ks_b if shaped else None, idx), proxy.joint_indices, proxy.joint_weights, m))
 
     pad = DEVIATION_PAD * size
     a, b = deviation_bound(frames, F, full.triangles, proxy.triangles, refine, DEVIATION_RESOLUTION * size,

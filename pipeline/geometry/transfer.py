@@ -32,7 +32,9 @@ def transfer_weights(full: SkinnedMesh, points: np.ndarray, max_influences: int,
     to lie nearer (a point of a shell with no triangle, ``-1``, looks at every triangle).
 
     Returns ``(joint_indices (n', max_influences) int32, joint_weights (n', max_influences)
-    float32, distance (n',) float64)``: the distance from each point to its full rest surface."""
+    float32, distance (n',) float64, triangle (n',) int64, barycentric (n', 3) float64)``: the
+    distance from each point to its full rest surface, and the nearest point it took (what
+    :func:`transfer_shapes` interpolates the blend shapes' offsets at)."""
     rest = full.positions
     tri = full.triangles.astype(np.int64)
     pts = np.asarray(points, dtype=np.float32)
@@ -82,4 +84,33 @@ def transfer_weights(full: SkinnedMesh, points: np.ndarray, max_influences: int,
     tot = W.sum(axis=1, keepdims=True)
     W = W / np.where(tot > 0, tot, 1.0)
     out_j, out_w, *_ = limit_influences(J, W, max_influences)
-    return out_j, out_w.astype(np.float32), d
+    return out_j, out_w.astype(np.float32), d, t, bary
+
+
+def transfer_shapes(full: SkinnedMesh, triangle, barycentric) -> tuple:
+    """The full mesh's blend shapes carried to new points by the same closest-point transfer as
+    their weights (:func:`transfer_weights`' ``triangle`` and ``barycentric``): each offset, the
+    primary one and every in-between's, interpolated barycentrically over that triangle's corners
+    (the rest point moves with its nearest surface point's shape).  A shape's response stays
+    piecewise linear in its weight with the same knots (the interpolation is linear in the
+    offsets).  Each shape keeps the new points it moves (``pointIndices``)."""
+    from ..model import BlendShape
+
+    corners = full.triangles.astype(np.int64)[np.asarray(triangle, dtype=np.int64)]  # (n', 3)
+    bary = np.asarray(barycentric, dtype=np.float64)
+    n = full.vertex_count
+    out = []
+    for sh in full.blend_shapes:
+        def carry(o, idx=np.asarray(sh.indices, dtype=np.int64)):
+            dense = np.zeros((n, 3))
+            dense[idx] = o
+            return np.einsum("pc,pcx->px", bary, dense[corners])
+        prim = carry(sh.offsets)
+        ibs = [(w, carry(o)) for w, o in sh.inbetweens]
+        moved = np.any(prim != 0, axis=1)
+        for _, o in ibs:
+            moved |= np.any(o != 0, axis=1)
+        keep = np.flatnonzero(moved)
+        out.append(BlendShape(sh.name, keep.astype(np.int32), prim[keep].astype(np.float32),
+                              tuple((w, o[keep].astype(np.float32)) for w, o in ibs)))
+    return tuple(out)

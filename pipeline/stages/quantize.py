@@ -167,14 +167,26 @@ def fold_point_scale(mesh: SkinnedMesh, r: float) -> SkinnedMesh:
     same skinned points at every frame, exactly.  With ``D = r I``: ``M_j p = K_j B_j^-1 p = K_j
     (D B_j)^-1 (D p)``, and ``D G x = G' (r x)`` for ``G' = [A_G | r t_G]``.  Where the skeleton
     carries ``r`` in every pose relative to its bind (:func:`point_scale`), the bind transforms
-    then hold the skeleton's own scale, which :func:`fold_joint_scales` divides out of both: the
+    (and a rest pose that was the bind pose: its roots' rest locals times ``D``, so it stays the
+    bind pose) then hold the skeleton's own scale, which :func:`fold_joint_scales` divides out of both: the
     asset's joints are rigid at bind and in every pose, as Blender's armature (bones hold no
     scale) shows them."""
     from dataclasses import replace as dc_replace
 
     if r == 1.0:
         return mesh
+    from ..model import skel_transforms
+
     D = np.diag([r, r, r, 1.0])
+    # a rest pose that is the bind pose stays the bind pose (its roots' rest locals times D): the
+    # source's rest == bind relation is kept (COL308), and its rest then shows the skeleton's size
+    rest = mesh.rest_transforms
+    K = skel_transforms(rest, mesh.parents)
+    tol = 1e-6 * max(1.0, float(np.abs(mesh.bind_transforms[:, :3, 3]).max(initial=0.0)))
+    if np.allclose(K, mesh.bind_transforms, rtol=0.0, atol=tol):
+        rest = rest.copy()
+        roots = mesh.parents < 0
+        rest[roots] = D @ rest[roots]
     G = mesh.geom_bind.copy()
     G[:3, 3] *= r
     shapes = tuple(dc_replace(b, offsets=(b.offsets.astype(np.float64) * r).astype(np.float32),
@@ -182,7 +194,8 @@ def fold_point_scale(mesh: SkinnedMesh, r: float) -> SkinnedMesh:
                                                for w, o in b.inbetweens))
                    for b in mesh.blend_shapes)
     return mesh.replace(positions=(mesh.positions.astype(np.float64) * r).astype(np.float32),
-                        geom_bind=G, bind_transforms=D @ mesh.bind_transforms, blend_shapes=shapes)
+                        geom_bind=G, bind_transforms=D @ mesh.bind_transforms, rest_transforms=rest,
+                        blend_shapes=shapes)
 
 
 def unit_range_shapes(mesh: SkinnedMesh):

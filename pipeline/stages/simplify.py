@@ -12,9 +12,11 @@ the proxy's parts, spheres and the every-frame proof are made exactly as for any
    the real rest positions by :func:`colossus.pipeline.geometry.collapse.apply_collapses` so that
    every closed shell stays closed with its Euler characteristic.
 2. Skin (:mod:`colossus.pipeline.geometry.transfer`): closest-point transfer on the full rest mesh,
-   at most ``--max-influences`` per vertex.
+   at most ``--max-influences`` per vertex; the blend shapes' offsets (in-betweens included) by the
+   same transfer, at the same nearest points.
 3. Deviation (:mod:`colossus.pipeline.geometry.deviation`): an upper bound of the two-sided
-   distance between the skinned surfaces on the bind pose and every frame of every clip.
+   distance between the skinned surfaces (blend shapes applied at each frame's weights) on the
+   bind pose and every frame of every clip.
 
 ``--max-deviation`` keeps the longest prefix of the history whose bound stays within the limit
 (a bisection over the prefix length; each prefix is only *decided*: subdivided down to the limit,
@@ -84,9 +86,6 @@ def simplify(mesh: SkinnedMesh, target_faces: int | None = None, max_deviation=N
         raise ValueError("simplify: expected target_faces or max_deviation, got neither")
     if target_faces is not None and int(target_faces) < 4:
         raise ValueError(f"simplify target_faces: expected >= 4, got {target_faces}")
-    dropped = None
-    if mesh.blend_shapes:  # the proxy's offsets and its deviation bound under shapes: not built yet
-        mesh, dropped = drop_shapes(mesh)
     spec = parse_max_deviation(max_deviation)
     t_start = time.perf_counter()
     n, m = mesh.vertex_count, mesh.face_count
@@ -186,48 +185,7 @@ def simplify(mesh: SkinnedMesh, target_faces: int | None = None, max_deviation=N
                                "(the remaining collapses would change a shell's topology or open border)")
     if limit is not None and proxy is mesh and m > goal:
         report.warnings.append(f"no decimation keeps the deviation within {limit:.6g}; the full mesh is kept")
-    if dropped is not None:  # named as not carried, with its bound (the proxy follows the skeleton only)
-        from .. import notcarried
-        items = list(proxy.source.get(notcarried.SOURCE_KEY) or []) + [dropped]
-        proxy = proxy.replace(source=dict(proxy.source, **{notcarried.SOURCE_KEY: items}))
-        report.warnings.append(notcarried.warning_line(dropped))
     if int(closed_out.sum()) < int(dec.closed.sum()):
         report.warnings.append(f"{int(dec.closed.sum()) - int(closed_out.sum())} closed shells did not stay closed")
     return proxy, report
 
-
-def drop_shapes(mesh: SkinnedMesh):
-    """The mesh without its blend shapes (the proxy does not carry them yet), and the
-    ``morph_targets`` record naming them with the bound of what that moves: per vertex the sum over
-    shapes of the largest displacement a shape gives it over every clip, at the frames and between
-    them (weights lerp between frames, so a shape's displacement is piecewise linear in time with
-    corners at its knots: the largest is at a frame or at a knot inside the weights' range), over
-    the model size."""
-    from dataclasses import replace as dc_replace
-
-    from .. import notcarried
-    from ..model import kernel_shapes
-
-    ks = kernel_shapes(mesh.blend_shapes, mesh.vertex_count)
-    total = np.zeros(mesh.vertex_count)
-    for s in range(len(ks)):
-        w = np.concatenate([c.shape_weights[:, s] for c in mesh.clips]) if mesh.clips else np.zeros(0)
-        k, o = ks.knots[s], ks.knot_offsets[s]
-        if not len(w) or not np.any(w):
-            continue
-        lo, hi = float(w.min()), float(w.max())
-        reach = np.linalg.norm(ks.displacement(s, w), axis=2).max(0)  # at the frames
-        inside = (k >= lo) & (k <= hi)
-        if inside.any():
-            reach = np.maximum(reach, np.linalg.norm(o[inside], axis=2).max(0))
-        total[ks.indices[s]] += reach
-    size = model_scale(rest_skel(mesh)) or 1.0
-    live = [sh.name for s, sh in enumerate(mesh.blend_shapes)
-            if mesh.clips and np.any(np.concatenate([c.shape_weights[:, s] for c in mesh.clips]))]
-    item = notcarried.item(
-        "morph_targets", live or [sh.name for sh in mesh.blend_shapes],
-        f"the simplified proxy does not carry the {len(mesh.blend_shapes)} blend shapes yet (it follows the "
-        "skeleton only; import without --target-faces / --max-deviation to carry them) (bound: the largest sum "
-        "over shapes of a vertex's displacement in any clip, mesh space)", float(total.max(initial=0.0)) / size)
-    clips = tuple(dc_replace(c, shape_weights=np.zeros((c.frame_count, 0))) for c in mesh.clips)
-    return mesh.replace(blend_shapes=(), clips=clips), item
