@@ -1,12 +1,13 @@
 """How far a collision proxy strays from the full skinned mesh: :func:`deviation`.
 
-On the bind pose and every frame of every clip (:class:`Poses`, :func:`mesh_poses`), both meshes
-(their blend shapes applied first at the clip's weights: the proxy carries the full mesh's,
-:func:`colossus.pipeline.geometry.transfer.transfer_shapes`) are skinned (:func:`colossus.runtime.kernels.skin.skin_frames`, the one skinning kernel, once per
-pose for both directions) and the two-sided distance between the skinned surfaces is bounded from
-above by :func:`colossus.pipeline.geometry.surface_distance.deviation_bound` (a Lipschitz bound and
-a convexity bound per piece, pieces subdivided where they are more than ``DEVIATION_REFINE`` above
-the largest distance found), plus ``DEVIATION_PAD * size`` for float32 rounding.
+On the bind pose and every frame of every clip (:class:`Poses`, :func:`mesh_poses`), both meshes (their
+blend shapes applied first at the clip's weights: the proxy carries the full mesh's,
+:func:`colossus.pipeline.geometry.transfer.transfer_shapes`) are skinned
+(:func:`colossus.runtime.kernels.skin.skin_frames`, the one skinning kernel, once per pose for both
+directions) and the two-sided distance between the skinned surfaces is bounded from above by
+:func:`colossus.pipeline.geometry.surface_distance.deviation_bound` (a Lipschitz bound and a convexity
+bound per piece, pieces subdivided where they are more than ``DEVIATION_REFINE`` above the largest
+distance found), plus ``DEVIATION_PAD * size`` for float32 rounding.
 """
 
 from __future__ import annotations

@@ -87,13 +87,13 @@ JOINT_SCALE_STEP = 1e-5
 
 
 def joint_scales(mesh: SkinnedMesh, k: float) -> np.ndarray:
-    """(b,) the uniform scale ``s_j`` to divide out of each joint's space: ``k`` (:func:`root_scale`)
-    at the roots (the root's own bind scale where it differs from ``k`` by more than
-    :data:`JOINT_SCALE_STEP`: the bind is made rigid, and the animation keeps the ratio, rounded
-    to half precision within the clip's stated storage bound), then down each chain the parent's, times the joint's own step where its bind
-    transform's uniform scale (``|det|^(1/3)`` of its linear part) differs from its parent's by
-    more than :data:`JOINT_SCALE_STEP` (a centimetre subtree under a metre root, an armature
-    scaled below its root joint)."""
+    """(b,) the uniform scale ``s_j`` to divide out of each joint's space: ``k`` (:func:`root_scale`) at
+    the roots (the root's own bind scale where it differs from ``k`` by more than
+    :data:`JOINT_SCALE_STEP`: the bind is made rigid, and the animation keeps the ratio, rounded to half
+    precision within the clip's stated storage bound), then down each chain the parent's, times the
+    joint's own step where its bind transform's uniform scale (``|det|^(1/3)`` of its linear part)
+    differs from its parent's by more than :data:`JOINT_SCALE_STEP` (a centimetre subtree under a metre
+    root, an armature scaled below its root joint)."""
     lin = mesh.bind_transforms[:, :3, :3]
     u = np.cbrt(np.abs(np.linalg.det(lin)))
     s = np.ones(len(mesh.parents))

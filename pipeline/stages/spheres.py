@@ -18,21 +18,21 @@ the radius is multiplied by the largest ratio, over the poses, of that transform
 singular value to its largest axis scale: the contract moves a sphere by the joint transform and
 scales its radius by the largest axis scale, which alone would not cover the sheared ball.
 
-**Between frames.**  The asset's guarantee covers every time in ``[first, last]`` of every clip as
+**Between frames.** The asset's guarantee covers every time in ``[first, last]`` of every clip as
 UsdSkel interpolates it, which ``colossus validate`` certifies with
-:func:`runtime.certify.continuous`.  The same certificate runs here on the clips exactly as the
+:func:`runtime.certify.continuous`. The same certificate runs here on the clips exactly as the
 writer will store them (translations and rotations float32, scales float16) in ``growth`` mode,
-holding each interval to the padded minimal radius (``r (1 + SPHERE_PAD_RADIUS) + SPHERE_PAD_RELATIVE
-* model size``) times the interval's scale ratio (``s_lo / s_hi`` of the joint's transform, below 1
-where a non-uniform scale on its path makes the certificate conservative, exactly as the validator
-holds a radius): wherever it cannot, it subdivides, down to 2^6 sub-steps, and the part's radius
-becomes the largest bound it reached over that ratio (``growth`` in the report, beyond the padded
-radius; 0 for most parts).  Where it reaches no finite bound (a dual-quaternion skin outside its
-bound's hypotheses: animated scales, a stretched or mirrored skinning transform, negative weights)
-no radius would pass the validator: the import fails closed with an :class:`InputError` naming the
-clip, interval, part and reason, and nothing is written.  The validator's adaptive subdivision stops at or before every node this one stopped
-at (its radius is at least the bound there), so the written spheres pass it.  Finally the radius
-is rounded up to float32.
+holding each interval to the padded minimal radius (``r (1 + SPHERE_PAD_RADIUS) +
+SPHERE_PAD_RELATIVE * model size``) times the interval's scale ratio (``s_lo / s_hi`` of the joint's
+transform, below 1 where a non-uniform scale on its path makes the certificate conservative, exactly
+as the validator holds a radius): wherever it cannot, it subdivides, down to 2^6 sub-steps, and the
+part's radius becomes the largest bound it reached over that ratio (``growth`` in the report, beyond
+the padded radius; 0 for most parts). Where it reaches no finite bound (a dual-quaternion skin
+outside every bound it has: a mirrored skinning transform, negative weights) no radius would pass
+the validator: the import fails closed with an :class:`InputError` naming the clip, interval, part
+and reason, and nothing is written. The validator's adaptive subdivision stops at or before every
+node this one stopped at (its radius is at least the bound there), so the written spheres pass it.
+Finally the radius is rounded up to float32.
 
 ``slack_ratio`` compares the sphere with the tightest possible per-pose sphere: the radius over the
 largest per-pose minimal sphere radius of the part's points, computed exactly on the bind pose and
@@ -236,7 +236,8 @@ def _between_frames(mesh, parts_in, centers, target, pose_far) -> np.ndarray:
         need_c = c.bound / c.ratio
         if not np.isfinite(need_c).all():  # fail closed: no radius would pass the validator
             i, p = (int(x) for x in np.argwhere(~np.isfinite(need_c))[0])
-            why = next((f["reason"].removesuffix(": not certified") for f in c.failures if (f["interval"], f["part"]) == (i, p) and "reason" in f),
+            why = next((f["reason"].removesuffix(": not certified") for f in c.failures
+                        if (f["interval"], f["part"]) == (i, p) and "reason" in f),
                        "the certificate reached no finite bound")
             raise InputError(mesh.source.get("path") or mesh.source.get("file"),
                              f"not written (validate would reject it): no between-frames bound on "

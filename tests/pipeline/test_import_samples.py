@@ -629,7 +629,8 @@ def test_proxy_of_a_blend_shape_rig_carries_the_shapes_within_its_deviation_boun
     assert worst_bare > bound, (worst_bare, bound)
     v = CliRunner().invoke(main, ["validate", str(out), "--source", str(src)], prog_name="colossus")
     assert v.exit_code == 0, v.output
-    print(f"proxy with shapes: {worst:.4g} off the full surface (bound {bound:.4g}; without its shapes {worst_bare:.4g})")
+    print(f"proxy with shapes: {worst:.4g} off the full surface (bound {bound:.4g}; "
+          f"without its shapes {worst_bare:.4g})")
 
 
 @pytest.mark.parametrize("seed", [0, 1, 7, 11])

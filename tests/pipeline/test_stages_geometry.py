@@ -639,3 +639,30 @@ def test_quantize_makes_every_bind_rigid_and_keeps_the_skinned_points(case):
             if out.source.get("clip_info") else []
         allowed = (stated[0] if stated else 0.0) * size + 1e-6 * size
         assert np.abs(got - want).max() <= allowed, (case, c_src.name, np.abs(got - want).max() / size)
+
+
+def test_trim_cheap_bound_is_never_below_what_the_trim_moves():
+    """``bind._trim_cheap`` (``2 d (L |p| + T)``, what lets the bind stage skin exactly only the
+    vertices that could reach the ``skin_influences`` line) is, per vertex, never below the exact
+    distance ``_trim_moves`` measures between all influences and the kept ones, on a tube with a
+    fifth influence and negligible weights on random vertices (bind pose and every frame)."""
+    from colossus.pipeline.stages import bind as BS
+
+    mesh = synth.make_tube()
+    rng = np.random.default_rng(2)
+    n = mesh.vertex_count
+    ji = np.c_[mesh.joint_indices, rng.integers(0, 3, n)].astype(np.int32)
+    extra = np.where(rng.random(n) < 0.5, rng.uniform(0.01, 0.08, n), rng.uniform(0, 5e-5, n))
+    jw = np.c_[mesh.joint_weights.astype(np.float64), extra]
+    jw /= jw.sum(1, keepdims=True)
+    full = mesh.replace(joint_indices=ji, joint_weights=jw.astype(np.float32))
+    out, rep = BS.bind(full, 4)
+    oj, ow, over, negl, dropped = BS.limit_influences(ji.astype(np.int64), jw, 4)
+    rows = np.flatnonzero(over.any(1) | negl.any(1))
+    assert len(rows) > 20
+    cheap = BS._trim_cheap(out, rows, dropped[rows])
+    for r, c in zip(rows, cheap):
+        exact = BS._trim_moves(out, ji.astype(np.int64), jw, oj, ow, np.array([r]))
+        assert exact <= c, (r, exact, c)
+    assert rep.counts["trim_moves_relative"] * BS._posed_size(out) >= max(
+        BS._trim_moves(out, ji.astype(np.int64), jw, oj, ow, rows), 0.0) * (1 - 1e-9)
