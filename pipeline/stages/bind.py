@@ -14,7 +14,7 @@ from colossus.runtime.schema import parents_first
 from .. import notcarried
 from ..errors import InputError
 from ..model import Clip, SkinnedMesh
-from ..tolerances import NEGLIGIBLE_WEIGHT, model_scale
+from ..tolerances import NEGLIGIBLE_WEIGHT
 from . import StageReport
 
 UNWEIGHTED_POLICIES = ("error", "nearest-bone")
@@ -116,21 +116,20 @@ def limit_influences(joint_indices: np.ndarray, weights: np.ndarray, max_influen
 TRIM_RELATIVE = 1e-4
 
 
-def _trim_moves(mesh: SkinnedMesh, ji_full, jw_full, ji_kept, jw_kept, rows) -> float:
+def _trim_moves(mesh: SkinnedMesh, ji_full, jw_full, ji_kept, jw_kept, rows, poses=None) -> float:
     """Largest distance, at the bind pose and at every frame of every clip, between the vertices
     ``rows`` skinned with every influence they had (``ji_full``, ``jw_full``, normalised) and with
     the kept ones: the mesh's own method, its blend shapes at each clip's weights (UsdSkel's
     order), in skeleton space.  Exact at those poses (the one kernel, float64)."""
     from colossus.runtime.kernels import skin as SK
 
-    from ..model import kernel_shapes, skel_transforms
+    from ..model import kernel_shapes
 
     inv_bind = np.linalg.inv(mesh.bind_transforms)
     ks = kernel_shapes(mesh.blend_shapes, mesh.vertex_count) if mesh.blend_shapes else None
     a_j, a_w = np.ascontiguousarray(ji_full[rows], np.int32), np.ascontiguousarray(jw_full[rows], np.float32)
     b_j, b_w = np.ascontiguousarray(ji_kept[rows], np.int32), np.ascontiguousarray(jw_kept[rows], np.float32)
-    poses = [(mesh.bind_transforms[None], None)]
-    poses += [(skel_transforms(c.local, mesh.parents), c.shape_weights) for c in mesh.clips]
+    poses = _poses(mesh) if poses is None else poses
     step = max(1, min(64, 2_000_000 // max(1, mesh.vertex_count if ks is not None else len(rows))))
     worst = 0.0
     for skel, W in poses:
@@ -147,7 +146,7 @@ def _trim_moves(mesh: SkinnedMesh, ji_full, jw_full, ji_kept, jw_kept, rows) -> 
     return worst
 
 
-def _trim_cheap(mesh: SkinnedMesh, rows, dropped) -> np.ndarray | None:
+def _trim_cheap(mesh: SkinnedMesh, rows, dropped, poses=None) -> np.ndarray | None:
     """A cheap upper bound, per vertex of ``rows``, of what dropping weight ``dropped`` moves it
     (linear blend only; None otherwise): with ``d`` the dropped weight and the kept weights scaled
     by ``1 / (1 - d)``, ``x_full - x_kept = sum_dropped w_j (M_j p - x_kept)``, and every skinned
@@ -156,13 +155,11 @@ def _trim_cheap(mesh: SkinnedMesh, rows, dropped) -> np.ndarray | None:
     shape's largest displacement over the weights its clips reach added), so ``|x_full - x_kept| <=
     2 d (L |p| + T)``. Lets :func:`_trim_moves` skin exactly only the vertices that could reach the
     record's line."""
-    from ..model import skel_transforms
-
     if mesh.skinning_method != "classicLinear":
         return None
     inv_bind = np.linalg.inv(mesh.bind_transforms)
     L = T = 0.0
-    for skel in [mesh.bind_transforms[None]] + [skel_transforms(c.local, mesh.parents) for c in mesh.clips]:
+    for skel, _ in (_poses(mesh) if poses is None else poses):
         m = skel @ inv_bind @ mesh.geom_bind
         L = max(L, float(np.linalg.norm(m[..., :3, :3], ord=2, axis=(-2, -1)).max(initial=0.0)))
         T = max(T, float(np.linalg.norm(m[..., :3, 3], axis=-1).max(initial=0.0)))
@@ -185,15 +182,21 @@ def _trim_cheap(mesh: SkinnedMesh, rows, dropped) -> np.ndarray | None:
 
 def _posed_size(mesh: SkinnedMesh) -> float:
     """The posed model size (the contract's: the mesh as its first clip's first frame poses it; the
-    bind pose without a clip), that tolerances are relative to."""
-    from colossus.runtime.kernels import skin as SK
+    bind pose without a clip), that tolerances are relative to (:func:`.quantize.posed_size`)."""
+    from ..model import skel_transforms
+    from .quantize import posed_size
 
+    skel = skel_transforms(mesh.clips[0].local[0], mesh.parents) if mesh.clips else mesh.bind_transforms
+    return posed_size(mesh, skel) or 1.0
+
+
+def _poses(mesh: SkinnedMesh) -> list:
+    """``[(skel (f, b, 4, 4), shape weights (f, S) or None)]``: the bind pose, then every clip's
+    frames (what :func:`_trim_cheap` and :func:`_trim_moves` both read, computed once)."""
     from ..model import skel_transforms
 
-    skel = skel_transforms(mesh.clips[0].local[:1], mesh.parents) if mesh.clips else mesh.bind_transforms[None]
-    mats = SK.fold_method(mesh.skinning_method, skel @ np.linalg.inv(mesh.bind_transforms), mesh.geom_bind)
-    return model_scale(SK.skin_frames(mesh.positions, mesh.joint_indices, mesh.joint_weights, mats)[0]) or 1.0
-
+    return [(mesh.bind_transforms[None], None)] + [(skel_transforms(c.local, mesh.parents), c.shape_weights)
+                                                   for c in mesh.clips]
 
 def bind(mesh: SkinnedMesh, max_influences: int = 4, unweighted: str = "error"):
     """Limit, clean and normalise skin weights; order joints parents-first.
@@ -267,9 +270,10 @@ def bind(mesh: SkinnedMesh, max_influences: int = 4, unweighted: str = "error"):
     moved, size = 0.0, 1.0
     if len(rows):
         size = _posed_size(out)
-        cheap = _trim_cheap(out, rows, dropped_weight[rows])
+        poses = _poses(out)
+        cheap = _trim_cheap(out, rows, dropped_weight[rows], poses)
         exact = rows if cheap is None else rows[cheap > 0.5 * TRIM_RELATIVE * size]
-        moved = _trim_moves(out, ji, jw / np.where(total > 0, total, 1.0)[:, None], out_j, out_w, exact) \
+        moved = _trim_moves(out, ji, jw / np.where(total > 0, total, 1.0)[:, None], out_j, out_w, exact, poses) \
             if len(exact) else 0.0
         if cheap is not None and len(exact) < len(rows):  # the rest: their cheap bound (sound, below half the line)
             moved = max(moved, float(cheap[cheap <= 0.5 * TRIM_RELATIVE * size].max(initial=0.0)))

@@ -356,21 +356,26 @@ def _storage_bound(norms: np.ndarray, joint_indices, joint_weights, dist, chunk:
     return out
 
 
-def _posed_size(mesh: SkinnedMesh, local: np.ndarray) -> float:
+def posed_size(mesh: SkinnedMesh, skel: np.ndarray) -> float:
     """The model size (:func:`pipeline.tolerances.model_scale`) of the vertices skinned by the
-    joint-local transforms ``local`` (b, 4, 4): the model as a clip moves it (bind-space positions
-    can be at another scale: lumberjack's mesh is authored in centimetres, bound by x100 binds,
-    and moved in metres)."""
+    skeleton-space joint transforms ``skel`` (b, 4, 4), the mesh's own method, float64: the
+    contract's posed size when ``skel`` is a clip's first frame (bind-space positions can be at
+    another scale: lumberjack's mesh is authored in centimetres, bound by x100 binds, and moved in
+    metres)."""
     from colossus.runtime.kernels.skin import fold_method, skin_frames
 
-    from ..model import skel_transforms
     from ..tolerances import model_scale
 
-    mats = fold_method(mesh.skinning_method, skel_transforms(local, mesh.parents) @ np.linalg.inv(mesh.bind_transforms),
-                       mesh.geom_bind)
+    mats = fold_method(mesh.skinning_method, skel[None] @ np.linalg.inv(mesh.bind_transforms), mesh.geom_bind)
     return model_scale(skin_frames(mesh.positions, mesh.joint_indices, mesh.joint_weights, mats,
                                    dtype=np.float64)[0])
 
+
+def _posed_size(mesh: SkinnedMesh, local: np.ndarray) -> float:
+    """:func:`posed_size` at the joint-local transforms ``local`` (b, 4, 4)."""
+    from ..model import skel_transforms
+
+    return posed_size(mesh, skel_transforms(local, mesh.parents))
 
 def _one_hemisphere(q: np.ndarray) -> np.ndarray:
     """``q`` (f, b, 4) with each joint's quaternions kept in one hemisphere along time (a sign

@@ -352,9 +352,9 @@ def _dq_source(path, seed=5):
     return path
 
 
-def _usd_skinned(path, times):
-    """usd-core's own skinning (the mesh's skinningMethod, SkinningQuery.ComputeSkinnedPoints) of
-    the stage's one skinned mesh at ``times``, in world space: (T, n, 3) float64, and the points."""
+def _usd_binding(path):
+    """usd-core's view of the stage's one skinned mesh: ``(stage, binding, skel query, skinning
+    query)`` (the stage returned so its prims stay valid)."""
     from pxr import Usd, UsdGeom, UsdSkel
 
     stage = Usd.Stage.Open(str(path))
@@ -364,6 +364,15 @@ def _usd_skinned(path, times):
     (binding,) = cache.ComputeSkelBindings(root, Usd.PrimDefaultPredicate)
     sq = cache.GetSkelQuery(binding.GetSkeleton())
     (q,) = [t for t in binding.GetSkinningTargets() if t.GetPrim().IsA(UsdGeom.Mesh)]
+    return stage, binding, sq, q
+
+
+def _usd_skinned(path, times):
+    """usd-core's own skinning (the mesh's skinningMethod, SkinningQuery.ComputeSkinnedPoints) of
+    the stage's one skinned mesh at ``times``, in world space: (T, n, 3) float64, and the points."""
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    stage, binding, sq, q = _usd_binding(path)
     pts = UsdGeom.Mesh(q.GetPrim()).GetPointsAttr().Get()
     out = []
     for t in times:
@@ -459,13 +468,7 @@ def _usd_shaped(path, times):
     (SkinningQuery.ComputeSkinnedPoints), in world space: (T, n, 3) float64."""
     from pxr import Usd, UsdGeom, UsdSkel
 
-    stage = Usd.Stage.Open(str(path))
-    cache = UsdSkel.Cache()
-    root = next(UsdSkel.Root(p) for p in stage.Traverse() if p.IsA(UsdSkel.Root))
-    cache.Populate(root, Usd.PrimDefaultPredicate)
-    (binding,) = cache.ComputeSkelBindings(root, Usd.PrimDefaultPredicate)
-    sq = cache.GetSkelQuery(binding.GetSkeleton())
-    (q,) = [t for t in binding.GetSkinningTargets() if t.GetPrim().IsA(UsdGeom.Mesh)]
+    stage, binding, sq, q = _usd_binding(path)
     bq = UsdSkel.BlendShapeQuery(UsdSkel.BindingAPI(q.GetPrim()))
     offsets, indices = bq.ComputeSubShapePointOffsets(), bq.ComputeBlendShapePointIndices()
     pts = UsdGeom.Mesh(q.GetPrim()).GetPointsAttr().Get()

@@ -288,10 +288,11 @@ def test_factor_terms_match_naive(compiled):
 
 
 # -- bounds: soundness against dense brute force ----------------------------------------------
-def random_rig(rng, J=6, n=400, F=6, angle=0.8, scale=False, tight=True):
-    """A random joint tree, random points skinned to 1-4 nearby joints, one part per joint
-    (strongest joint), a clip of F frames of random rotations (up to ``angle`` rad per frame),
-    translations and (``scale``) non-uniform scales; spheres fitted to the frames only."""
+def _random_tree_skin(rng, J, n):
+    """The random skin every random rig here shares: a joint tree of ``J`` joints (rest
+    translations, no rotation), its bind pose, ``n`` points round the joints skinned to their 4
+    nearest (weights falling off with distance, some dropped), and one part per joint (its
+    strongest points): ``(parents, rest_t, rest, bind, pts, ji, jw, order, voff)``."""
     parents = np.array([-1] + [int(rng.integers(0, j)) for j in range(1, J)])
     rest_t = rng.normal(size=(J, 3))
     rest_t[0] = 0
@@ -306,6 +307,14 @@ def random_rig(rng, J=6, n=400, F=6, angle=0.8, scale=False, tight=True):
     owner = ji[:, 0]
     order = np.argsort(owner, kind="stable")
     voff = np.searchsorted(owner[order], np.arange(J + 1))
+    return parents, rest_t, rest, bind, pts, ji, jw, order, voff
+
+
+def random_rig(rng, J=6, n=400, F=6, angle=0.8, scale=False, tight=True):
+    """A random joint tree, random points skinned to 1-4 nearby joints, one part per joint
+    (strongest joint), a clip of F frames of random rotations (up to ``angle`` rad per frame),
+    translations and (``scale``) non-uniform scales; spheres fitted to the frames only."""
+    parents, rest_t, rest, bind, pts, ji, jw, order, voff = _random_tree_skin(rng, J, n)
     times = np.arange(F, dtype=float)
     rots = Rotation.random(J, random_state=int(rng.integers(1 << 30)))
     q = np.empty((F, J, 4))
@@ -639,20 +648,7 @@ def test_sampled_proof_is_the_same_with_the_chunk_search(monkeypatch):
 def random_dq_rig(rng, J=6, n=300, F=6, angle=0.6, slack=0.15, world=None):
     """A random rig skinned by UsdSkel's DQS (naive_dqs), its spheres fitted to the frames (plus
     ``slack`` of the radius: the in-between poses may leave them)."""
-    parents = np.array([-1] + [int(rng.integers(0, j)) for j in range(1, J)])
-    rest_t = rng.normal(size=(J, 3))
-    rest_t[0] = 0
-    rest = naive.trs(rest_t, np.tile([0, 0, 0, 1.0], (J, 1)), np.ones((J, 3)))
-    bind = naive.compose(rest, parents)
-    pts = (bind[rng.integers(0, J, n), :3, 3] + 0.4 * rng.normal(size=(n, 3))).astype(np.float32)
-    d = np.linalg.norm(pts[:, None] - bind[None, :, :3, 3], axis=2)
-    ji = np.argsort(d, 1)[:, :4].astype(np.int32)
-    w = np.exp(-np.take_along_axis(d, ji, 1) ** 2) * (rng.random((n, 4)) < 0.8)
-    w[:, 0] += 1e-3
-    jw = (w / w.sum(1, keepdims=True)).astype(np.float32)
-    owner = ji[:, 0]
-    order = np.argsort(owner, kind="stable")
-    voff = np.searchsorted(owner[order], np.arange(J + 1))
+    parents, rest_t, rest, bind, pts, ji, jw, order, voff = _random_tree_skin(rng, J, n)
     times = np.arange(F, dtype=float)
     q = np.empty((F, J, 4))
     cur = Rotation.random(J, random_state=int(rng.integers(1 << 30)))
@@ -981,20 +977,7 @@ def _skin_naive(method, pts, ji, jw, skin):
 def random_shape_rig(rng, method="classicLinear", J=5, n=200, F=6, angle=0.3, slack=0.1, S=3):
     """A random rig with blend shapes (in-betweens included) whose weights are animated, skinned
     by ``method``; its spheres fitted to the frames (plus ``slack`` of the radius)."""
-    parents = np.array([-1] + [int(rng.integers(0, j)) for j in range(1, J)])
-    rest_t = rng.normal(size=(J, 3))
-    rest_t[0] = 0
-    rest = naive.trs(rest_t, np.tile([0, 0, 0, 1.0], (J, 1)), np.ones((J, 3)))
-    bind = naive.compose(rest, parents)
-    pts = (bind[rng.integers(0, J, n), :3, 3] + 0.4 * rng.normal(size=(n, 3))).astype(np.float32)
-    d = np.linalg.norm(pts[:, None] - bind[None, :, :3, 3], axis=2)
-    ji = np.argsort(d, 1)[:, :4].astype(np.int32)
-    w = np.exp(-np.take_along_axis(d, ji, 1) ** 2) * (rng.random((n, 4)) < 0.8)
-    w[:, 0] += 1e-3
-    jw = (w / w.sum(1, keepdims=True)).astype(np.float32)
-    owner = ji[:, 0]
-    order = np.argsort(owner, kind="stable")
-    voff = np.searchsorted(owner[order], np.arange(J + 1))
+    parents, rest_t, rest, bind, pts, ji, jw, order, voff = _random_tree_skin(rng, J, n)
     shapes = []
     for s in range(S):
         idx = np.sort(rng.choice(n, size=n // 2, replace=False))

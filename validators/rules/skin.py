@@ -95,6 +95,14 @@ def joint_order(asset, ctx):
         yield hit(f"joint {asset.joints[j]!r} comes before its parent", joint=asset.joints[j])
 
 
+def _not_invertible_affine(mats):
+    """Indices of the (J, 4, 4) matrices whose 3x3 part has |det| <= the tolerance or whose last
+    row is not (0, 0, 0, 1), and every matrix's determinant (COL307, COL318)."""
+    det = np.linalg.det(mats[:, :3, :3])
+    affine = np.all(np.abs(mats[:, 3] - [0, 0, 0, 1]) < 1e-9, axis=1)
+    return np.nonzero((np.abs(det) <= tol.MIN_DETERMINANT) | ~affine)[0], det
+
+
 @rule("COL307", "bind-invertible", "error",
       "Bind transforms and the geomBindTransform are invertible.", needs=("skeleton",))
 def bind_invertible(asset, ctx):
@@ -102,9 +110,7 @@ def bind_invertible(asset, ctx):
     with |det| > 1e-12 and a last row (0, 0, 0, 1).
     Why: skinning uses the inverse bind transforms.
     Example: a bind matrix with a zero scale axis."""
-    det = np.linalg.det(asset.bind[:, :3, :3])
-    affine = np.all(np.abs(asset.bind[:, 3] - [0, 0, 0, 1]) < 1e-9, axis=1)
-    bad = np.nonzero((np.abs(det) <= tol.MIN_DETERMINANT) | ~affine)[0]
+    bad, det = _not_invertible_affine(asset.bind)
     for j in bad[:20]:
         yield hit(f"bind transform of joint {asset.joints[j]!r} is not an invertible affine matrix (det {det[j]:.3g})",
                   joint=asset.joints[j])
@@ -121,9 +127,7 @@ def rest_invertible(asset, ctx):
     each part in its joint's space, the inverse of the joint's pose; a singular rest transform
     squashes the joint and everything under it to nothing.
     Example: a rest matrix with a zero scale axis, or a last row (0, 1, 0, 0)."""
-    det = np.linalg.det(asset.rest[:, :3, :3])
-    affine = np.all(np.abs(asset.rest[:, 3] - [0, 0, 0, 1]) < 1e-9, axis=1)
-    bad = np.nonzero((np.abs(det) <= tol.MIN_DETERMINANT) | ~affine)[0]
+    bad, det = _not_invertible_affine(asset.rest)
     for j in bad[:20]:
         yield hit(f"rest transform of joint {asset.joints[j]!r} is not an invertible affine matrix (det {det[j]:.3g})",
                   joint=asset.joints[j])
